@@ -1,0 +1,267 @@
+"""Command line: ``python -m workbench`` / ``workbench``.
+
+Sub-commands: ``check``, ``simulate``, ``linearize``, ``bench``. Every error a user
+can cause (a bad file, a bad argument) is reported in one readable line, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .errors import WorkbenchError
+
+__all__ = ["main", "build_parser"]
+
+EPILOG = "Units are SI (m, Pa absolute, kg, s, V) unless an option says otherwise."
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from .plant import Plant
+    from . import units
+    plant = Plant.from_toml(args.plant)
+    s = plant.summary()
+    if args.json:
+        print(json.dumps(s, indent=2))
+        return 0
+    prm = plant.params
+    rows = [
+        ("plant", f"{s['name']}  ({args.plant})"),
+        ("supply", f"{units.pa_to_bar(prm['supply.pressure']):.2f} bar abs"),
+        ("piston area a / b", f"{s['area_a_m2'] * 1e4:.3f} / {s['area_b_m2'] * 1e4:.3f} cm^2"),
+        ("stroke", f"{s['stroke_m'] * 1e3:.0f} mm"),
+        ("chamber volume a / b (max)", f"{s['volume_a_max_m3'] * 1e6:.1f} / "
+                                       f"{s['volume_b_max_m3'] * 1e6:.1f} cm^3"),
+        ("max force extend / retract", f"{s['max_force_extend_N']:.1f} / "
+                                       f"{s['max_force_retract_N']:.1f} N"),
+        ("valve flow, one edge fully open",
+         f"{s['valve_flow_full_opening_l_min_anr']:.0f} l/min ANR "
+         f"({s['valve_flow_full_opening_kg_s'] * 1e3:.2f} g/s, supply -> atmosphere)"),
+        ("moving mass", f"{prm['load.mass']:.3f} kg"),
+        ("effects", ", ".join(s["effects"]) or "none (nominal model)"),
+        ("states", f"{len(s['states'])}: {', '.join(s['states'][:8])}"
+                   + (" ..." if len(s["states"]) > 8 else "")),
+        ("controller", ", ".join(f"{k}={v}" for k, v in s["controller"].items()) or "none"),
+    ]
+    width = max(len(r[0]) for r in rows)
+    print("plant file OK")
+    for k, v in rows:
+        print(f"  {k:<{width}}  {v}")
+    return 0
+
+
+def _cmd_linearize(args: argparse.Namespace) -> int:
+    from .plant import Plant
+    from . import linearize
+    plant = Plant.from_toml(args.plant)
+    op = linearize.operating_point(plant, args.x)
+    lin = linearize.tangent(plant, op)
+    red_err = None
+    try:
+        red = linearize.reduced_position_model(lin).as_dict()
+    except WorkbenchError as exc:
+        red, red_err = None, str(exc)
+    ev = lin.eigenvalues
+    out = {
+        "plant": str(args.plant),
+        "equilibrium": {"x": op.x, "u": op.u, "p_a": op.p_a, "p_b": op.p_b,
+                        "state": {k: float(v) for k, v in zip(op.state_names, op.state)}},
+        "states": list(lin.state_names),
+        "inputs": list(lin.input_names),
+        "outputs": list(lin.output_names),
+        "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist(),
+        "eigenvalues": [{"re": float(e.real), "im": float(e.imag)} for e in ev],
+        "reduced_model": red,
+        "notes": list(lin.notes) + ([red_err] if red_err else []),
+    }
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"equilibrium at x = {op.x:.4g} m: u = {op.u:.4f} V, p_a = {op.p_a / 1e5:.4f} bar, "
+          f"p_b = {op.p_b / 1e5:.4f} bar")
+    print("eigenvalues (1/s): " + ", ".join(f"{e.real:.4g}{e.imag:+.4g}j" for e in ev))
+    if red:
+        print(f"reduced position model: Kv = {red['Kv']:.4g} m/(V s), w0 = {red['w0']:.4g} rad/s, "
+              f"zeta = {red['zeta']:.4g}  (fit error {red['fit_error']:.1e})")
+    for n in out["notes"]:
+        print("note: " + n)
+    np.set_printoptions(precision=4, linewidth=120)
+    print("A =\n", lin.A, "\nB =\n", lin.B.ravel())
+    return 0
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .plant import Plant
+    from .recording import Recording, fit_signals
+    from . import controllers, simulate
+    plant = Plant.from_toml(args.plant)
+    rec = Recording.load(args.recording)
+    out_dir = Path(args.out)
+    run = replay(plant, rec, progress=None if not args.quiet else False,
+                 mode=args.mode)
+    sim_rec = _as_recording_columns(run, rec)
+    fits = fit_signals(rec, sim_rec, names=[n for n in ("x", "p_a", "p_b") if n in rec])
+    out_dir.mkdir(parents=True, exist_ok=True)
+    sim_rec.to_csv(out_dir / "simulation.csv")
+    from .params import atomic_write_text
+    atomic_write_text(out_dir / "fit.json", json.dumps(fits, indent=2) + "\n")
+    if not args.no_plot:
+        from .plots import replay_figure
+        replay_figure(rec, sim_rec, fits, out_dir / "simulation.png",
+                      title=f"{plant.name}: {run.info['mode'].replace('_', ' ')} replay of "
+                            f"{Path(args.recording).name}")
+    mode = run.info["mode"].replace("_", " ")
+    print(f"{mode} replay of {args.recording} ({len(rec)} samples, {rec.duration:.3g} s)")
+    for k, v in fits.items():
+        print(f"  fit {k:<4} {v:7.2f} %")
+    print(f"wrote {out_dir / 'simulation.csv'} and {out_dir / 'fit.json'}")
+    return 0
+
+
+def replay(plant, rec, progress=None, mode: str = "auto"):
+    """Simulate a recording: closed loop on ``r`` with the plant's controller, else open loop on ``u``."""
+    from . import controllers, simulate
+    from .errors import InputError
+    closed = "r" in rec and plant.params.has_controller
+    if mode == "closed":
+        if "r" not in rec:
+            raise InputError("closed-loop replay needs an 'r' column", source=rec.source)
+        if not plant.params.has_controller:
+            raise InputError("closed-loop replay needs a [controller] section",
+                             source=plant.params.source)
+        closed = True
+    elif mode == "open":
+        closed = False
+    t = rec.t
+    x_first = float(np.clip(rec["x"][0], 0.0, plant.stroke))
+    pa = float(rec["p_a"][0]) if "p_a" in rec else None
+    pb = float(rec["p_b"][0]) if "p_b" in rec else None
+    x0 = plant.initial_state(x_first, p_a=pa, p_b=pb)
+    if closed:
+        ctrl = controllers.from_plant(plant)
+        ref = simulate.Reference(times=t - t[0], values=np.asarray(rec["r"]), hold=True)
+        run = simulate.closed_loop(plant, ctrl, ref, x0=x0, output_times=t - t[0],
+                                   progress=progress)
+    else:
+        run = simulate.open_loop(plant, t - t[0], rec["u"], x0=x0, progress=progress)
+    return run
+
+
+def _as_recording_columns(run, rec):
+    """Simulated recording with the same columns as ``rec`` (r and unknown columns copied)."""
+    from .recording import Recording
+    data = {}
+    for c in rec.columns:
+        if c == "t":
+            continue
+        if c in ("u", "x", "p_a", "p_b", "p_s", "v"):
+            data[c] = np.asarray(run[c], dtype=float)
+        else:
+            data[c] = np.asarray(rec[c], dtype=float)
+    meta = dict(rec.metadata)
+    meta["simulated_by"] = "workbench simulate"
+    return Recording(columns=tuple(rec.columns), data=_readonly(data, rec.t),
+                     metadata=meta, source="<simulation>")
+
+
+def _readonly(data, t):
+    out = {"t": np.array(t, dtype=float)}
+    out.update({k: np.array(v, dtype=float) for k, v in data.items()})
+    for v in out.values():
+        v.flags.writeable = False
+    return out
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from . import bench
+    result = bench.run(args.name, quick=args.quick)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for k, v in result.items():
+            print(f"{k}: {v}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (also used by the tests to check ``--help``)."""
+    p = argparse.ArgumentParser(
+        prog="workbench",
+        description="Design and validation workbench for electropneumatic servodrives.",
+        epilog=EPILOG)
+    from . import __version__
+    p.add_argument("--version", action="version", version=f"workbench {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    c = sub.add_parser("check", help="validate a plant file and print a summary",
+                       description="Validate PLANT.toml (formats.md sections 1-2) and print "
+                                   "areas, volumes, maximum force, valve flow at full opening "
+                                   "(l/min ANR) and the effects that are switched on.",
+                       epilog=EPILOG)
+    c.add_argument("plant", metavar="PLANT.toml", help="plant file")
+    c.add_argument("--json", action="store_true", help="print the summary as JSON (SI units)")
+    c.set_defaults(func=_cmd_check)
+
+    s = sub.add_parser("simulate", help="replay a recording on the plant model",
+                       description="Replay RECORDING on the plant model: closed loop on the "
+                                   "recording's 'r' with the plant file's [controller] when both "
+                                   "exist, else open loop on its 'u'. The simulation starts from "
+                                   "the recording's first position (and pressures, if recorded). "
+                                   "Writes DIR/simulation.csv (the recording's columns; 'r' and "
+                                   "unknown columns copied), DIR/fit.json (NRMSE fit in percent "
+                                   "of x, p_a, p_b as recorded) and DIR/simulation.png.",
+                       epilog=EPILOG)
+    s.add_argument("plant", metavar="PLANT.toml", help="plant file")
+    s.add_argument("recording", metavar="RECORDING", help="recording (.csv or .mat, formats.md section 3)")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
+    s.add_argument("--mode", choices=("auto", "closed", "open"), default="auto",
+                   help="force closed-loop or open-loop replay (default: auto)")
+    s.add_argument("--no-plot", action="store_true", help="do not write simulation.png")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_simulate)
+
+    lz = sub.add_parser("linearize", help="equilibrium and exact tangent model at a position",
+                        description="Find the equilibrium with the piston at rest at X (valve "
+                                    "command, chamber pressures), the exact A, B, C, D from "
+                                    "CasADi's automatic differentiation, the eigenvalues, and "
+                                    "the reduced position model Kv / (s (s^2/w0^2 + 2 zeta s/w0 "
+                                    "+ 1)) of paper 000 fitted to it.",
+                        epilog=EPILOG)
+    lz.add_argument("plant", metavar="PLANT.toml", help="plant file")
+    lz.add_argument("--x", type=float, required=True, metavar="X", help="piston position, m")
+    lz.add_argument("--json", action="store_true", help="print JSON")
+    lz.set_defaults(func=_cmd_linearize)
+
+    b = sub.add_parser("bench", help="run a benchmark and print ratios",
+                       description="Benchmarks measure against a baseline in the same run and "
+                                   "print ratios. NAME: simulate (closed-loop 24 s, 25 mm "
+                                   "reference plant, vs scipy solve_ivp LSODA).",
+                       epilog=EPILOG)
+    b.add_argument("name", choices=("simulate",), help="benchmark")
+    b.add_argument("--json", action="store_true", help="print JSON")
+    b.add_argument("--quick", action="store_true", help="shorter run (smoke test)")
+    b.set_defaults(func=_cmd_bench)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except WorkbenchError as exc:
+        print(f"workbench {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,26 @@
+"""What the sampled-data simulator expects of a controller."""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+__all__ = ["DiscreteController"]
+
+
+@runtime_checkable
+class DiscreteController(Protocol):
+    """A sampled-data position controller.
+
+    The simulator calls :meth:`reset` once, then :meth:`update` every
+    ``sample_time`` seconds with the reference and the measured outputs; the
+    command it returns is clipped to the valve's range, quantised by the DAC and
+    held until the next sample (ZOH).
+    """
+
+    sample_time: float
+
+    def reset(self) -> Any:
+        """Initial controller state."""
+
+    def update(self, state: Any, r: float, y: dict[str, float]) -> tuple[Any, float]:
+        """(new state, command in V) from the reference (m) and measurements (SI)."""

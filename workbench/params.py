@@ -1,0 +1,474 @@
+"""Plant parameters: the TOML contract of ``formats.md`` sections 1 and 2.
+
+Every parameter is declared once, in :data:`SCHEMA`, with its unit, whether it is
+required, the range it must lie in and, for optional keys, the *effect* it belongs
+to. Loading, validation, saving and the symbolic parameter vector of the plant are
+all driven by that table, so a key cannot be known to one and unknown to another.
+
+Examples
+--------
+>>> from workbench.params import PlantParams
+>>> params = PlantParams.from_toml("designs/plants/situm_rodless.toml")  # doctest: +SKIP
+>>> params.effects                                                        # doctest: +SKIP
+()
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import tempfile
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import tomli_w
+
+from .errors import InputError
+
+__all__ = [
+    "Key",
+    "SCHEMA",
+    "EFFECTS",
+    "EFFECT_NAMES",
+    "CONTROLLER_KINDS",
+    "PlantParams",
+]
+
+
+@dataclass(frozen=True)
+class Key:
+    """Declaration of one plant-file key.
+
+    Parameters
+    ----------
+    section, name : str
+        Where the key lives: ``[section] name = ...``.
+    unit : str
+        SI unit (``"-"`` when dimensionless).
+    kind : {"float", "int", "str"}
+        Expected TOML type (integers are accepted for floats).
+    required : bool
+        Must be present in every plant file.
+    low, high : float or None
+        Admissible range.
+    low_open, high_open : bool
+        Whether the bounds are excluded.
+    effect : str or None
+        Name of the effect (formats.md section 2) the key switches on.
+    physical : bool
+        Enters the dynamics, so it is part of the symbolic parameter vector.
+    default : Any
+        Value used when an optional non-effect key is absent.
+    doc : str
+        One line of explanation, used in error messages and ``check``.
+    """
+
+    section: str
+    name: str
+    unit: str
+    kind: str = "float"
+    required: bool = True
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    effect: str | None = None
+    physical: bool = True
+    default: Any = None
+    doc: str = ""
+
+    @property
+    def path(self) -> str:
+        """Dotted name, e.g. ``"load.mass"``."""
+        return f"{self.section}.{self.name}"
+
+    def expected(self) -> str:
+        """Human description of an admissible value."""
+        if self.kind == "str":
+            return "a string"
+        if self.kind == "int":
+            what = "an integer"
+        else:
+            what = "a number"
+        lo = "" if self.low is None else f"{self.low:g}"
+        hi = "" if self.high is None else f"{self.high:g}"
+        if self.low is not None and self.high is not None:
+            left = "(" if self.low_open else "["
+            right = ")" if self.high_open else "]"
+            what += f" in {left}{lo}, {hi}{right}"
+        elif self.low is not None:
+            what += f" {'>' if self.low_open else '>='} {lo}"
+        elif self.high is not None:
+            what += f" {'<' if self.high_open else '<='} {hi}"
+        if self.unit and self.unit != "-":
+            what += f" ({self.unit})"
+        return what
+
+
+def _k(section: str, name: str, unit: str, **kw: Any) -> Key:
+    return Key(section, name, unit, **kw)
+
+
+_POS = dict(low=0.0, low_open=True)
+_NONNEG = dict(low=0.0)
+
+#: Every key a plant file may contain, in the order ``to_toml`` writes them.
+SCHEMA: tuple[Key, ...] = (
+    _k("gas", "temperature", "K", **_POS, doc="supply air temperature"),
+    _k("gas", "polytropic_index", "-", low=1.0, high=1.4,
+       doc="chamber process exponent k (1 isothermal .. 1.4 adiabatic)"),
+    _k("gas", "atmospheric_pressure", "Pa", **_POS, doc="ambient pressure, absolute"),
+    _k("gas", "heat_transfer_coefficient", "W/K", required=False, effect="heat_transfer",
+       **_NONNEG, doc="wall heat transfer h*A of each chamber"),
+    _k("supply", "pressure", "Pa", **_POS, doc="supply pressure, absolute"),
+    _k("supply", "reservoir_volume", "m^3", required=False, effect="supply_droop", **_POS,
+       doc="volume of the reservoir between regulator and valve"),
+    _k("supply", "regulator_conductance", "m^3/(s Pa)", required=False,
+       effect="supply_droop", **_POS, doc="sonic conductance of the regulator"),
+    _k("valve", "sonic_conductance", "m^3/(s Pa)", **_POS,
+       doc="ISO 6358 sonic conductance C of one fully open edge"),
+    _k("valve", "critical_pressure_ratio", "-", low=0.0, high=1.0, low_open=True,
+       high_open=True, doc="ISO 6358 critical pressure ratio b"),
+    _k("valve", "command_center", "V", doc="command that centres the spool"),
+    _k("valve", "command_span", "V", **_POS, doc="|u - centre| that opens an edge fully"),
+    _k("valve", "command_min", "V", physical=False, doc="lowest command the drive accepts"),
+    _k("valve", "command_max", "V", physical=False, doc="highest command the drive accepts"),
+    _k("valve", "deadband", "-", required=False, effect="valve_deadband", low=0.0,
+       high=1.0, high_open=True, doc="spool overlap as a fraction of the span"),
+    _k("valve", "null_offset", "V", required=False, effect="valve_offset",
+       doc="the spool is centred at command_center + null_offset"),
+    _k("valve", "bandwidth", "Hz", required=False, effect="valve_dynamics", **_POS,
+       doc="natural frequency of the spool's 2nd-order lag"),
+    _k("valve", "damping", "-", required=False, effect="valve_dynamics", **_POS,
+       doc="damping ratio of the spool's 2nd-order lag"),
+    _k("cylinder", "bore", "m", **_POS, doc="piston diameter"),
+    _k("cylinder", "rod_diameter", "m", **_NONNEG, doc="rod diameter, 0 for rodless"),
+    _k("cylinder", "stroke", "m", **_POS, doc="usable stroke L; x = 0 where chamber a is smallest"),
+    _k("cylinder", "dead_volume_a", "m^3", **_POS, doc="volume of chamber a at x = 0"),
+    _k("cylinder", "dead_volume_b", "m^3", **_POS, doc="volume of chamber b at x = L"),
+    _k("load", "mass", "kg", **_POS, doc="piston + payload"),
+    _k("load", "viscous_friction", "N s/m", **_NONNEG, doc="viscous friction coefficient"),
+    _k("load", "external_force", "N", required=False, default=0.0,
+       doc="constant force opposing positive x (e.g. gravity on a vertical axis)"),
+    _k("friction", "coulomb", "N", required=False, effect="dry_friction", **_NONNEG,
+       doc="sliding (Coulomb) friction"),
+    _k("friction", "static", "N", required=False, effect="dry_friction", **_NONNEG,
+       doc="break-away (static) friction"),
+    _k("friction", "stribeck_velocity", "m/s", required=False, effect="dry_friction",
+       **_POS, doc="velocity scale of the Stribeck decay"),
+    _k("lines", "length", "m", required=False, effect="line_dynamics", **_POS,
+       doc="length of each valve-chamber line"),
+    _k("lines", "diameter", "m", required=False, effect="line_dynamics", **_POS,
+       doc="inner diameter of the lines"),
+    _k("lines", "segments", "-", kind="int", required=False, physical=False, low=1,
+       high=200, doc="lumped segments per line (default from the length)"),
+    _k("leakage", "conductance_to_atmosphere", "m^3/(s Pa)", required=False,
+       effect="leakage", **_NONNEG, doc="ISO 6358 conductance from each chamber to atmosphere"),
+    _k("leakage", "cross_piston", "kg/(s Pa)", required=False, effect="leakage",
+       **_NONNEG, doc="laminar leak conductance across the piston"),
+    _k("controller", "kind", "", kind="str", required=False, physical=False,
+       doc="controller law: 'p', 'pd' or 'pid'"),
+    _k("controller", "sample_time", "s", required=False, physical=False, **_POS,
+       doc="controller period; u is held between samples"),
+    _k("controller", "kp", "V/m", required=False, physical=False, doc="proportional gain"),
+    _k("controller", "kd", "V s/m", required=False, physical=False, default=0.0,
+       doc="derivative gain"),
+    _k("controller", "ki", "V/(m s)", required=False, physical=False, default=0.0,
+       doc="integral gain (kind = 'pid')"),
+    _k("controller", "position_resolution", "m", required=False, physical=False,
+       **_POS, doc="ADC quantisation step of the measured position"),
+    _k("controller", "command_resolution", "V", required=False, physical=False,
+       **_POS, doc="DAC quantisation step of the command"),
+)
+
+#: Top-level keys (outside any section).
+TOP_LEVEL: tuple[Key, ...] = (
+    _k("", "name", "", kind="str", required=False, physical=False, doc="plant name"),
+)
+
+REQUIRED_SECTIONS = ("gas", "supply", "valve", "cylinder", "load")
+OPTIONAL_SECTIONS = ("friction", "lines", "leakage", "controller")
+CONTROLLER_KINDS = ("p", "pd", "pid")
+
+#: Effect name -> keys that describe it (formats.md section 2).
+EFFECTS: dict[str, tuple[Key, ...]] = {}
+for _key in SCHEMA:
+    if _key.effect:
+        EFFECTS.setdefault(_key.effect, ())
+        EFFECTS[_key.effect] = EFFECTS[_key.effect] + (_key,)
+EFFECT_NAMES: tuple[str, ...] = (
+    "dry_friction", "valve_deadband", "valve_offset", "valve_dynamics",
+    "line_dynamics", "leakage", "supply_droop", "heat_transfer",
+)
+#: Effects for which any one of the keys is enough (the others default to zero).
+_ANY_KEY_EFFECTS = {"leakage"}
+
+_BY_PATH = {k.path: k for k in SCHEMA}
+
+
+def _fmt_path(path: str) -> str:
+    section, _, name = path.rpartition(".")
+    return f"[{section}] {name}" if section else name
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Validated, immutable contents of a plant file.
+
+    Parameters
+    ----------
+    values : Mapping[str, float | int | str]
+        Dotted key -> value, SI units, only keys that were given (or defaulted).
+    name : str
+        Plant name.
+    source : str
+        File the parameters came from (for messages).
+    """
+
+    values: Mapping[str, Any]
+    name: str = "plant"
+    source: str = "<memory>"
+
+    # ---------------------------------------------------------------- creation
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source: str = "<memory>") -> "PlantParams":
+        """Validate a nested mapping as parsed from TOML.
+
+        Raises
+        ------
+        InputError
+            Naming the file, the key and what was expected.
+        """
+        if not isinstance(data, Mapping):
+            raise InputError("expected a table of sections", source=source)
+        values: dict[str, Any] = {}
+        name = "plant"
+        for top, content in data.items():
+            if top == "name":
+                if not isinstance(content, str):
+                    raise InputError(f"expected a string, got {content!r}", source=source,
+                                     location="key 'name'")
+                name = content
+                continue
+            if top not in REQUIRED_SECTIONS + OPTIONAL_SECTIONS:
+                hint = difflib.get_close_matches(top, REQUIRED_SECTIONS + OPTIONAL_SECTIONS, 1)
+                known = ", ".join(f"[{s}]" for s in REQUIRED_SECTIONS + OPTIONAL_SECTIONS)
+                raise InputError(
+                    f"unknown section [{top}]"
+                    + (f" (did you mean [{hint[0]}]?)" if hint else "")
+                    + f"; known sections: {known}",
+                    source=source, location=f"section [{top}]")
+            if not isinstance(content, Mapping):
+                raise InputError(f"expected a section [{top}] with keys, got a value {content!r}",
+                                 source=source, location=f"key '{top}'")
+            known_keys = [k.name for k in SCHEMA if k.section == top]
+            for name_, raw in content.items():
+                path = f"{top}.{name_}"
+                key = _BY_PATH.get(path)
+                if key is None:
+                    hint = difflib.get_close_matches(name_, known_keys, 1)
+                    raise InputError(
+                        f"unknown key '{name_}'"
+                        + (f" (did you mean '{hint[0]}'?)" if hint else "")
+                        + f"; keys of [{top}]: {', '.join(known_keys)}",
+                        source=source, location=f"[{top}] {name_}")
+                values[path] = _check_value(key, raw, source)
+        for section in REQUIRED_SECTIONS:
+            if section not in data:
+                raise InputError(f"missing required section [{section}]", source=source,
+                                 location=f"section [{section}]")
+        for key in SCHEMA:
+            if key.required and key.path not in values:
+                raise InputError(f"missing required key; expected {key.expected()}: {key.doc}",
+                                 source=source, location=_fmt_path(key.path))
+        _check_effects(values, source)
+        _check_consistency(values, source)
+        return cls(values=dict(values), name=name, source=source)
+
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike) -> "PlantParams":
+        """Read and validate a plant file."""
+        path = Path(path)
+        src = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise InputError("file not found", source=src) from None
+        except OSError as exc:
+            raise InputError(f"cannot read the file: {exc.strerror}", source=src) from None
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"not valid TOML: {exc}", source=src) from None
+        return cls.from_dict(data, source=src)
+
+    # ---------------------------------------------------------------- access
+    def __getitem__(self, path: str) -> Any:
+        if path in self.values:
+            return self.values[path]
+        key = _BY_PATH.get(path)
+        if key is None:
+            raise KeyError(f"no plant parameter '{path}'")
+        if key.default is not None:
+            return key.default
+        raise KeyError(f"plant parameter '{path}' is not set in {self.source}")
+
+    def get(self, path: str, default: Any = None) -> Any:
+        """Value of a dotted key, or ``default`` when absent."""
+        try:
+            return self[path]
+        except KeyError:
+            return default
+
+    def __contains__(self, path: str) -> bool:
+        return path in self.values
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """Names of the effects this plant has, in formats.md order."""
+        return tuple(e for e in EFFECT_NAMES
+                     if any(k.path in self.values for k in EFFECTS[e]))
+
+    def has_effect(self, effect: str) -> bool:
+        """Whether the named effect is present."""
+        if effect not in EFFECTS:
+            raise KeyError(f"unknown effect '{effect}'; known: {', '.join(EFFECT_NAMES)}")
+        return effect in self.effects
+
+    @property
+    def has_controller(self) -> bool:
+        """Whether the plant file describes a controller."""
+        return "controller.kind" in self.values
+
+    def replace(self, **changes: Any) -> "PlantParams":
+        """A copy with dotted keys changed (``None`` removes an optional key).
+
+        The result is validated like a file, so an effect can be switched on by
+        giving all its keys, and off by removing them.
+
+        Examples
+        --------
+        >>> p2 = params.replace(**{"load.mass": 2.0})           # doctest: +SKIP
+        """
+        new = dict(self.values)
+        for path, val in changes.items():
+            if val is None:
+                new.pop(path, None)
+            else:
+                new[path] = val
+        return PlantParams.from_dict(_nest(new, self.name), source=self.source)
+
+    def without_effect(self, effect: str) -> "PlantParams":
+        """A copy with every key of ``effect`` removed."""
+        return self.replace(**{k.path: None for k in EFFECTS[effect]})
+
+    # ---------------------------------------------------------------- output
+    def to_dict(self) -> dict[str, Any]:
+        """Nested mapping in schema order, ready for TOML."""
+        return _nest(self.values, self.name)
+
+    def to_toml(self, path: str | os.PathLike) -> None:
+        """Write the plant file atomically (a temporary file renamed into place)."""
+        atomic_write_text(path, tomli_w.dumps(self.to_dict()))
+
+
+def _nest(values: Mapping[str, Any], name: str) -> dict[str, Any]:
+    out: dict[str, Any] = {"name": name}
+    for key in SCHEMA:
+        if key.path in values:
+            out.setdefault(key.section, {})[key.name] = values[key.path]
+    return out
+
+
+def _check_value(key: Key, raw: Any, source: str) -> Any:
+    loc = _fmt_path(key.path)
+    if key.kind == "str":
+        if not isinstance(raw, str):
+            raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
+        return raw
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        raise InputError(f"expected {key.expected()}, got {raw!r} ({type(raw).__name__})",
+                         source=source, location=loc)
+    if key.kind == "int":
+        if not isinstance(raw, int):
+            raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
+        val: Any = int(raw)
+    else:
+        val = float(raw)
+    if not math.isfinite(val):
+        raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
+    bad = False
+    if key.low is not None and (val < key.low or (key.low_open and val == key.low)):
+        bad = True
+    if key.high is not None and (val > key.high or (key.high_open and val == key.high)):
+        bad = True
+    if bad:
+        raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
+    return val
+
+
+def _check_effects(values: Mapping[str, Any], source: str) -> None:
+    for effect, keys in EFFECTS.items():
+        given = [k for k in keys if k.path in values]
+        if not given or effect in _ANY_KEY_EFFECTS:
+            continue
+        missing = [k for k in keys if k.path not in values]
+        if missing:
+            names = ", ".join(_fmt_path(k.path) for k in missing)
+            raise InputError(
+                f"effect '{effect}' is switched on by {_fmt_path(given[0].path)} but "
+                f"{names} is missing; give all of "
+                + ", ".join(k.name for k in keys) + " or none",
+                source=source, location=_fmt_path(missing[0].path))
+
+
+def _check_consistency(values: Mapping[str, Any], source: str) -> None:
+    if values["valve.command_min"] >= values["valve.command_max"]:
+        raise InputError("expected command_min < command_max", source=source,
+                         location="[valve] command_min")
+    center = values["valve.command_center"]
+    if not values["valve.command_min"] <= center <= values["valve.command_max"]:
+        raise InputError("expected command_center within [command_min, command_max]",
+                         source=source, location="[valve] command_center")
+    if values["cylinder.rod_diameter"] >= values["cylinder.bore"]:
+        raise InputError("expected rod_diameter < bore", source=source,
+                         location="[cylinder] rod_diameter")
+    p_atm = values["gas.atmospheric_pressure"]
+    if values["supply.pressure"] <= p_atm:
+        raise InputError(
+            f"expected an absolute supply pressure above atmospheric ({p_atm:g} Pa), got "
+            f"{values['supply.pressure']:g} Pa; a gauge value needs + {p_atm:g} Pa, "
+            "a value in bar needs * 1e5", source=source, location="[supply] pressure")
+    if "friction.static" in values and values["friction.static"] < values["friction.coulomb"]:
+        raise InputError("expected static >= coulomb (break-away friction is not lower "
+                         "than sliding friction)", source=source, location="[friction] static")
+    ctrl = [k for k in values if k.startswith("controller.")]
+    if ctrl:
+        for need in ("controller.kind", "controller.sample_time", "controller.kp"):
+            if need not in values:
+                raise InputError(f"a [controller] needs '{need.split('.')[1]}'", source=source,
+                                 location=_fmt_path(need))
+        if values["controller.kind"] not in CONTROLLER_KINDS:
+            raise InputError(f"expected one of {', '.join(repr(k) for k in CONTROLLER_KINDS)}, "
+                             f"got {values['controller.kind']!r}", source=source,
+                             location="[controller] kind")
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` so that readers see the old or the new file, never half."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise

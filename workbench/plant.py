@@ -1,0 +1,433 @@
+"""The servodrive as one symbolic CasADi model.
+
+:class:`Plant` composes the physics of :mod:`workbench.physics` according to a
+plant file into named CasADi Functions::
+
+    f(x, u, p) -> xdot      state derivative
+    h(x, u, p) -> y         outputs
+
+with the states, input, outputs and **all physical parameters** (the vector ``p``,
+names in :attr:`Plant.param_names`, nominal values in :attr:`Plant.p0`) symbolic,
+so the same model serves simulation, linearisation, estimation and MPC.
+
+Examples
+--------
+>>> from workbench import Plant
+>>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")   # doctest: +SKIP
+>>> plant.state_names                                              # doctest: +SKIP
+('x', 'v', 'p_a', 'p_b')
+>>> xdot = plant.f(plant.initial_state(0.25), 5.0, plant.p0)       # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from .errors import InputError
+from .params import SCHEMA, PlantParams
+from .physics import chamber, friction, gas, line, piston, supply, valve
+
+__all__ = ["Signal", "Plant", "OUTPUT_SIGNALS"]
+
+
+@dataclass(frozen=True)
+class Signal:
+    """Name, SI unit and meaning of a state, input or output."""
+
+    name: str
+    unit: str
+    doc: str = ""
+
+
+#: Outputs of every plant, in the order of ``h``.
+OUTPUT_SIGNALS: tuple[Signal, ...] = (
+    Signal("x", "m", "piston position"),
+    Signal("v", "m/s", "piston velocity"),
+    Signal("p_a", "Pa", "pressure in chamber a"),
+    Signal("p_b", "Pa", "pressure in chamber b"),
+    Signal("p_s", "Pa", "supply pressure at the valve"),
+    Signal("q_supply", "kg/s", "mass flow drawn from the supply"),
+    Signal("force", "N", "net pneumatic force on the piston"),
+)
+
+_INPUTS = (Signal("u", "V", "valve command"),)
+
+
+class Plant:
+    """Electropneumatic servodrive: composition of the physics for one plant file.
+
+    Parameters
+    ----------
+    params : PlantParams
+        Validated plant description.
+    friction : {"stick", "smooth"}
+        Dry-friction form: ``"stick"`` (Karnopp, sticks honestly; for simulation)
+        or ``"smooth"`` (differentiable; for optimisation). Irrelevant without
+        the ``dry_friction`` effect.
+
+    Attributes
+    ----------
+    f, h : casadi.Function
+        State derivative and outputs, both ``(x, u, p)``.
+    states, inputs, outputs : tuple of Signal
+    param_names : tuple of str
+        Dotted plant-file keys of the entries of ``p``.
+    p0 : numpy.ndarray
+        Nominal parameter values (SI).
+    """
+
+    def __init__(self, params: PlantParams, friction: str = "stick") -> None:
+        if friction not in ("stick", "smooth"):
+            raise ValueError(f"friction must be 'stick' or 'smooth', got {friction!r}")
+        self.params = params
+        self.friction = friction
+        self.name = params.name
+        self.param_names: tuple[str, ...] = tuple(
+            k.path for k in SCHEMA
+            if k.physical and (k.path in params.values or k.default is not None))
+        self.p0 = np.array([float(params[n]) for n in self.param_names])
+        self.segments = 0
+        if params.has_effect("line_dynamics"):
+            self.segments = int(params.get("lines.segments")
+                                or line.default_segments(params["lines.length"]))
+        self.states = self._state_signals()
+        self.inputs = _INPUTS
+        self.outputs = OUTPUT_SIGNALS
+        nx, npar = len(self.states), len(self.param_names)
+        self.x_sym = ca.SX.sym("x", nx)
+        self.u_sym = ca.SX.sym("u", 1)
+        self.p_sym = ca.SX.sym("p", npar)
+        xdot, y = self._build(self.x_sym, self.u_sym, self.p_sym, friction, underlap=0.0)
+        self.xdot_expr, self.y_expr = xdot, y
+        names = dict(name_in=["x", "u", "p"])
+        self.f = ca.Function("f", [self.x_sym, self.u_sym, self.p_sym], [xdot],
+                             names["name_in"], ["xdot"])
+        self.h = ca.Function("h", [self.x_sym, self.u_sym, self.p_sym], [y],
+                             names["name_in"], ["y"])
+
+    # ---------------------------------------------------------------- construction
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike, friction: str = "stick") -> "Plant":
+        """Load and validate a plant file (formats.md sections 1-2)."""
+        return cls(PlantParams.from_toml(path), friction=friction)
+
+    def to_toml(self, path: str | os.PathLike) -> None:
+        """Write the plant file (atomic)."""
+        self.params.to_toml(path)
+
+    def with_params(self, **changes: Any) -> "Plant":
+        """A new plant with dotted keys changed (None removes an optional key)."""
+        return Plant(self.params.replace(**changes), friction=self.friction)
+
+    def with_friction(self, friction: str) -> "Plant":
+        """The same plant with the other dry-friction form."""
+        return Plant(self.params, friction=friction)
+
+    # ---------------------------------------------------------------- signals
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.states)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.outputs)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.inputs)
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        return self.params.effects
+
+    def state_index(self, name: str) -> int:
+        try:
+            return self.state_names.index(name)
+        except ValueError:
+            raise KeyError(f"no state '{name}'; states: {', '.join(self.state_names)}") from None
+
+    def output_index(self, name: str) -> int:
+        try:
+            return self.output_names.index(name)
+        except ValueError:
+            raise KeyError(f"no output '{name}'; outputs: {', '.join(self.output_names)}") from None
+
+    def param_index(self, name: str) -> int:
+        try:
+            return self.param_names.index(name)
+        except ValueError:
+            raise KeyError(f"no parameter '{name}' in this plant; parameters: "
+                           f"{', '.join(self.param_names)}") from None
+
+    def _state_signals(self) -> tuple[Signal, ...]:
+        s = [Signal("x", "m", "piston position"), Signal("v", "m/s", "piston velocity"),
+             Signal("p_a", "Pa", "pressure in chamber a"),
+             Signal("p_b", "Pa", "pressure in chamber b")]
+        prm = self.params
+        if prm.has_effect("valve_dynamics"):
+            s += [Signal("spool", "V", "command the spool currently follows"),
+                  Signal("spool_rate", "V/s", "its rate")]
+        if prm.has_effect("heat_transfer"):
+            s += [Signal("T_a", "K", "gas temperature in chamber a"),
+                  Signal("T_b", "K", "gas temperature in chamber b")]
+        for side in ("a", "b"):
+            s += [Signal(f"line_{side}_p{j}", "Pa", f"pressure of line {side} node {j}")
+                  for j in range(self.segments)]
+            s += [Signal(f"line_{side}_q{j}", "kg/s", f"mass flow of line {side} segment {j}")
+                  for j in range(self.segments)]
+        if prm.has_effect("supply_droop"):
+            s += [Signal("p_s", "Pa", "reservoir (supply) pressure")]
+        return tuple(s)
+
+    # ---------------------------------------------------------------- geometry
+    @property
+    def area_a(self) -> float:
+        """Piston area on side a, m^2."""
+        return math.pi / 4.0 * self.params["cylinder.bore"] ** 2
+
+    @property
+    def area_b(self) -> float:
+        """Annulus area on side b (rod side), m^2."""
+        return math.pi / 4.0 * (self.params["cylinder.bore"] ** 2
+                                - self.params["cylinder.rod_diameter"] ** 2)
+
+    @property
+    def stroke(self) -> float:
+        return float(self.params["cylinder.stroke"])
+
+    @property
+    def controller_params(self) -> Mapping[str, Any]:
+        """The plant file's ``[controller]`` keys (empty without a controller)."""
+        return {k.split(".", 1)[1]: v for k, v in self.params.values.items()
+                if k.startswith("controller.")}
+
+    # ---------------------------------------------------------------- the model
+    def _build(self, X, U, P, friction_form: str, underlap: float):
+        prm = self.params
+        pv = {n: P[i] for i, n in enumerate(self.param_names)}
+        T = pv["gas.temperature"]
+        k = pv["gas.polytropic_index"]
+        p_atm = pv["gas.atmospheric_pressure"]
+        bore = pv["cylinder.bore"]
+        rod = pv["cylinder.rod_diameter"]
+        area_a = ca.pi / 4.0 * bore ** 2
+        area_b = ca.pi / 4.0 * (bore ** 2 - rod ** 2)
+        L = pv["cylinder.stroke"]
+        m = pv["load.mass"]
+
+        x, v, p_a, p_b = X[0], X[1], X[2], X[3]
+        i = 4
+        u = U[0]
+        derivs: dict[str, Any] = {}
+        if prm.has_effect("valve_dynamics"):
+            y_sp, y_sp_dot = X[i], X[i + 1]
+            i += 2
+            d1, d2 = valve.spool_dynamics(y_sp, y_sp_dot, u, pv["valve.bandwidth"],
+                                          pv["valve.damping"])
+            derivs["spool"], derivs["spool_rate"] = d1, d2
+            u_spool = y_sp
+        else:
+            u_spool = u
+        heat = prm.has_effect("heat_transfer")
+        if heat:
+            t_a, t_b = X[i], X[i + 1]
+            i += 2
+        else:
+            t_a = t_b = T
+        n = self.segments
+        if n:
+            la_p = [X[i + j] for j in range(n)]
+            la_q = [X[i + n + j] for j in range(n)]
+            lb_p = [X[i + 2 * n + j] for j in range(n)]
+            lb_q = [X[i + 3 * n + j] for j in range(n)]
+            i += 4 * n
+        if prm.has_effect("supply_droop"):
+            p_s = X[i]
+            i += 1
+        else:
+            p_s = pv["supply.pressure"]
+
+        offset = pv["valve.null_offset"] if "valve.null_offset" in pv else 0.0
+        deadband = pv["valve.deadband"] if "valve.deadband" in pv else 0.0
+        s = valve.spool_position(u_spool, pv["valve.command_center"],
+                                 pv["valve.command_span"], offset)
+        opening = valve.effective_opening(s, deadband)
+        port_a, port_b = (la_p[0], lb_p[0]) if n else (p_a, p_b)
+        port_ta, port_tb = (T, T) if n else (t_a, t_b)
+        q_va, q_vb, q_sup = valve.four_edge_flows(
+            opening, p_s, port_a, port_b, p_atm, pv["valve.sonic_conductance"],
+            pv["valve.critical_pressure_ratio"], T, port_ta, port_tb, underlap)
+
+        if n:
+            length, diam = pv["lines.length"], pv["lines.diameter"]
+            dpa, dqa = line.line_rates(la_p, la_q, q_va, p_a, length, diam, T)
+            dpb, dqb = line.line_rates(lb_p, lb_q, q_vb, p_b, length, diam, T)
+            q_a, q_b = la_q[-1], lb_q[-1]
+        else:
+            q_a, q_b = q_va, q_vb
+
+        leak_a = leak_b = cross = 0.0
+        if "leakage.conductance_to_atmosphere" in pv:
+            c_leak = pv["leakage.conductance_to_atmosphere"]
+            leak_a = supply.leak_to_atmosphere(p_a, p_atm, c_leak, t_a)
+            leak_b = supply.leak_to_atmosphere(p_b, p_atm, c_leak, t_b)
+        if "leakage.cross_piston" in pv:
+            cross = supply.cross_piston_leak(p_a, p_b, pv["leakage.cross_piston"])
+
+        v_a, v_b, dv_a, dv_b = chamber.volumes(x, v, area_a, area_b, L,
+                                               pv["cylinder.dead_volume_a"],
+                                               pv["cylinder.dead_volume_b"])
+        if heat:
+            h = pv["gas.heat_transfer_coefficient"]
+
+            def split(q):
+                return ca.fmax(q, 0.0), ca.fmax(-q, 0.0)
+
+            qa_in, qa_out = split(q_a)
+            qb_in, qb_out = split(q_b)
+            xa_in, xa_out = split(-cross)   # cross > 0: a -> b
+            xb_in, xb_out = split(cross)
+            tq_a = T * qa_in + t_b * xa_in
+            tq_b = T * qb_in + t_a * xb_in
+            dp_a, dt_a = chamber.pressure_temperature_rates(
+                p_a, t_a, v_a, dv_a, tq_a, qa_in + xa_in, qa_out + xa_out + leak_a, h, T)
+            dp_b, dt_b = chamber.pressure_temperature_rates(
+                p_b, t_b, v_b, dv_b, tq_b, qb_in + xb_in, qb_out + xb_out + leak_b, h, T)
+            derivs["T_a"], derivs["T_b"] = dt_a, dt_b
+        else:
+            dp_a = chamber.pressure_rate(p_a, v_a, dv_a, q_a - leak_a - cross, k, T)
+            dp_b = chamber.pressure_rate(p_b, v_b, dv_b, q_b - leak_b + cross, k, T)
+
+        force = piston.pneumatic_force(p_a, p_b, area_a, area_b, p_atm)
+        drive = force - pv["load.external_force"] + piston.end_stop_force(x, v, L, m)
+        beta = pv["load.viscous_friction"]
+        if prm.has_effect("dry_friction"):
+            fc, fs, vs = (pv["friction.coulomb"], pv["friction.static"],
+                          pv["friction.stribeck_velocity"])
+            if friction_form == "stick":
+                acc = friction.stick_slip_acceleration(v, drive, m, beta, fc, fs, vs)
+            else:
+                acc = (drive - friction.smooth_friction(v, fc, fs, vs, beta)) / m
+        else:
+            acc = (drive - beta * v) / m
+
+        if n:
+            for j in range(n):
+                derivs[f"line_a_p{j}"], derivs[f"line_a_q{j}"] = dpa[j], dqa[j]
+                derivs[f"line_b_p{j}"], derivs[f"line_b_q{j}"] = dpb[j], dqb[j]
+        if prm.has_effect("supply_droop"):
+            derivs["p_s"] = supply.reservoir_rate(
+                p_s, pv["supply.pressure"], pv["supply.regulator_conductance"],
+                pv["supply.reservoir_volume"], q_sup, T, k=k)
+        derivs.update(x=v, v=acc, p_a=dp_a, p_b=dp_b)
+        xdot = ca.vertcat(*[derivs[s_.name] for s_ in self.states])
+        y = ca.vertcat(x, v, p_a, p_b, p_s, q_sup, force)
+        return xdot, y
+
+    def regularised_f(self, underlap: float) -> ca.Function:
+        """``f`` of a valve whose every edge leaks ``underlap`` (fraction of full opening).
+
+        Used only to pin the equilibrium pressures of a closed-centre valve,
+        which the ideal valve leaves undetermined.
+        """
+        xdot, _ = self._build(self.x_sym, self.u_sym, self.p_sym, self.friction, underlap)
+        return ca.Function("f_reg", [self.x_sym, self.u_sym, self.p_sym], [xdot],
+                           ["x", "u", "p"], ["xdot"])
+
+    # ---------------------------------------------------------------- helpers
+    def pvec(self, **changes: float) -> np.ndarray:
+        """Nominal parameter vector with some entries replaced by dotted name."""
+        p = self.p0.copy()
+        for name, val in changes.items():
+            p[self.param_index(name.replace("__", "."))] = val
+        return p
+
+    def initial_state(self, x0: float, p_a: float | None = None, p_b: float | None = None,
+                      v0: float = 0.0, u0: float | None = None) -> np.ndarray:
+        """A consistent state at position ``x0`` (m).
+
+        Pressures default to the equilibrium of the valve at rest at ``x0``
+        (:func:`workbench.linearize.operating_point`); line nodes take their
+        chamber's pressure, line flows zero, temperatures the gas temperature, the
+        spool the command ``u0`` (default: the equilibrium command) and the supply
+        its set pressure.
+        """
+        if not 0.0 <= x0 <= self.stroke:
+            raise InputError(f"initial position {x0:g} m is outside the stroke [0, {self.stroke:g}] m")
+        if p_a is None or p_b is None or u0 is None:
+            from .linearize import operating_point
+            op = operating_point(self, x0)
+            p_a = op.p_a if p_a is None else p_a
+            p_b = op.p_b if p_b is None else p_b
+            u0 = op.u if u0 is None else u0
+        z = {"x": x0, "v": v0, "p_a": p_a, "p_b": p_b, "spool": u0, "spool_rate": 0.0,
+             "T_a": self.params["gas.temperature"], "T_b": self.params["gas.temperature"],
+             "p_s": self.params["supply.pressure"]}
+        out = np.zeros(len(self.states))
+        for i, s in enumerate(self.states):
+            if s.name in z:
+                out[i] = z[s.name]
+            elif s.name.startswith("line_a_p"):
+                out[i] = p_a
+            elif s.name.startswith("line_b_p"):
+                out[i] = p_b
+        return out
+
+    def evaluate_f(self, x: Sequence[float], u: float, p: Sequence[float] | None = None) -> np.ndarray:
+        """Numeric state derivative."""
+        return np.asarray(self.f(x, u, self.p0 if p is None else p)).ravel()
+
+    def evaluate_h(self, x: Sequence[float], u: float, p: Sequence[float] | None = None) -> np.ndarray:
+        """Numeric outputs."""
+        return np.asarray(self.h(x, u, self.p0 if p is None else p)).ravel()
+
+    def chamber_masses(self, state: Sequence[float]) -> tuple[float, float]:
+        """Gas mass (kg) in chambers a and b (lines excluded) for a numeric state."""
+        st = dict(zip(self.state_names, np.asarray(state, dtype=float)))
+        T = self.params["gas.temperature"]
+        v_a, v_b, _, _ = chamber.volumes(st["x"], 0.0, self.area_a, self.area_b, self.stroke,
+                                         self.params["cylinder.dead_volume_a"],
+                                         self.params["cylinder.dead_volume_b"])
+        return (chamber.chamber_mass(st["p_a"], v_a, st.get("T_a", T)),
+                chamber.chamber_mass(st["p_b"], v_b, st.get("T_b", T)))
+
+    def full_opening_flow(self) -> float:
+        """Mass flow (kg/s) through one fully open edge from supply to atmosphere."""
+        prm = self.params
+        return float(gas.iso6358_flow(prm["valve.sonic_conductance"],
+                                      prm["valve.critical_pressure_ratio"],
+                                      prm["supply.pressure"], prm["gas.atmospheric_pressure"],
+                                      prm["gas.temperature"], prm["gas.temperature"]))
+
+    def summary(self) -> dict[str, Any]:
+        """Facts a rig engineer checks first (SI)."""
+        from . import units
+        prm = self.params
+        p_s, p_atm = prm["supply.pressure"], prm["gas.atmospheric_pressure"]
+        q_full = self.full_opening_flow()
+        return {
+            "name": self.name,
+            "area_a_m2": self.area_a,
+            "area_b_m2": self.area_b,
+            "stroke_m": self.stroke,
+            "volume_a_max_m3": prm["cylinder.dead_volume_a"] + self.area_a * self.stroke,
+            "volume_b_max_m3": prm["cylinder.dead_volume_b"] + self.area_b * self.stroke,
+            "max_force_extend_N": (p_s - p_atm) * self.area_a,
+            "max_force_retract_N": (p_s - p_atm) * self.area_b,
+            "valve_flow_full_opening_kg_s": q_full,
+            "valve_flow_full_opening_l_min_anr": units.kg_s_to_l_min_anr(q_full),
+            "effects": list(self.effects),
+            "states": list(self.state_names),
+            "parameters": len(self.param_names),
+            "controller": dict(self.controller_params),
+        }
+
+    def __repr__(self) -> str:
+        eff = ", ".join(self.effects) or "no effects"
+        return f"Plant({self.name!r}, {len(self.states)} states, {eff})"

@@ -1,0 +1,419 @@
+"""Simulation of the nonlinear plant: open loop and sampled-data closed loop.
+
+The plant's ``f`` is integrated by CasADi's CVODES (BDF, variable order and step)
+over each interval in which the command is held, in scaled states so that one
+tolerance fits position, pressures and line flows alike.
+
+Examples
+--------
+>>> from workbench import Plant, simulate, controllers
+>>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")               # doctest: +SKIP
+>>> ref = simulate.steps([0.1, 0.4, 0.25], hold=2.0)                       # doctest: +SKIP
+>>> run = simulate.closed_loop(plant, controllers.from_plant(plant), ref,  # doctest: +SKIP
+...                            t_end=6.0, x0=0.25)
+>>> run.to_pandas().head()                                                 # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from .errors import InputError, WorkbenchError
+from .plant import Plant
+
+__all__ = [
+    "Trajectory", "Reference", "steps", "profile", "Simulator",
+    "open_loop", "closed_loop", "DEFAULT_RTOL", "DEFAULT_ATOL",
+]
+
+DEFAULT_RTOL = 1e-7  #: CVODES relative tolerance
+DEFAULT_ATOL = 1e-9  #: CVODES absolute tolerance on the scaled states
+
+
+def _scales(plant: Plant) -> np.ndarray:
+    out = []
+    for name in plant.state_names:
+        if name == "x":
+            out.append(plant.stroke)
+        elif name == "v":
+            out.append(1.0)
+        elif name in ("p_a", "p_b", "p_s") or "_p" in name:
+            out.append(1e5)
+        elif name in ("T_a", "T_b"):
+            out.append(300.0)
+        elif "_q" in name:
+            out.append(1e-3)
+        elif name == "spool":
+            out.append(10.0)
+        elif name == "spool_rate":
+            out.append(1e4)
+        else:
+            out.append(1.0)
+    return np.array(out)
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Result of a simulation: samples of states, command, outputs and reference.
+
+    Attributes
+    ----------
+    time : (N,) s. states : (N, nx). inputs : (N, 1) command u applied, V.
+    outputs : (N, ny). reference : (N,) m or None.
+    """
+
+    time: np.ndarray
+    states: np.ndarray
+    inputs: np.ndarray
+    outputs: np.ndarray
+    state_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    input_names: tuple[str, ...] = ("u",)
+    reference: np.ndarray | None = None
+    units: Mapping[str, str] = field(default_factory=dict)
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """A signal by name: an output, a state, ``u`` or ``r``."""
+        if name in self.output_names:
+            return self.outputs[:, self.output_names.index(name)]
+        if name in self.state_names:
+            return self.states[:, self.state_names.index(name)]
+        if name in self.input_names:
+            return self.inputs[:, self.input_names.index(name)]
+        if name == "r" and self.reference is not None:
+            return self.reference
+        if name == "t":
+            return self.time
+        raise KeyError(f"no signal '{name}'; signals: "
+                       + ", ".join(("t",) + self.input_names + self.output_names
+                                   + self.state_names + (("r",) if self.reference is not None else ())))
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Every signal by name (outputs, then remaining states), with t, u and r."""
+        cols: dict[str, np.ndarray] = {"t": self.time}
+        for i, n in enumerate(self.input_names):
+            cols[n] = self.inputs[:, i]
+        for i, n in enumerate(self.output_names):
+            cols[n] = self.outputs[:, i]
+        for i, n in enumerate(self.state_names):
+            cols.setdefault(n, self.states[:, i])
+        if self.reference is not None:
+            cols["r"] = self.reference
+        return cols
+
+    def to_pandas(self):
+        """DataFrame indexed by time (s) with every signal as a column."""
+        import pandas as pd
+        cols = self.columns()
+        t = cols.pop("t")
+        return pd.DataFrame(cols, index=pd.Index(t, name="t"))
+
+    def to_recording(self, columns: Sequence[str] = ("t", "u", "x", "p_a", "p_b"),
+                     metadata: Mapping[str, str] | None = None):
+        """A :class:`workbench.recording.Recording` of the chosen signals."""
+        from .recording import Recording
+        cols = self.columns()
+        data = {c: np.asarray(cols[c], dtype=float) for c in columns if c != "t"}
+        meta = dict(metadata or {})
+        if len(self.time) > 1:
+            meta.setdefault("sample_time", repr(float(np.median(np.diff(self.time)))))
+        return Recording.from_arrays(self.time, metadata=meta, **data)
+
+    def to_csv(self, path: str | os.PathLike,
+               columns: Sequence[str] = ("t", "u", "x", "v", "p_a", "p_b", "p_s", "r")) -> None:
+        """Write chosen signals as a recording CSV (formats.md section 3), atomically."""
+        cols = [c for c in columns if c != "r" or self.reference is not None]
+        self.to_recording(cols).to_csv(path)
+
+
+# ---------------------------------------------------------------------- references
+@dataclass(frozen=True)
+class Reference:
+    """A position reference r(t) (m): piecewise linear through (times, values)."""
+
+    times: np.ndarray
+    values: np.ndarray
+    hold: bool = False
+
+    def __call__(self, t: float | np.ndarray) -> np.ndarray:
+        if self.hold:
+            idx = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 1)
+            return self.values[idx]
+        return np.interp(t, self.times, self.values)
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1])
+
+
+def steps(levels: Sequence[float], hold: float, t0: float = 0.0) -> Reference:
+    """Step reference: each level held for ``hold`` seconds, the first from ``t0``."""
+    levels = np.asarray(levels, dtype=float)
+    times = t0 + hold * np.arange(len(levels) + 1)
+    return Reference(times=times, values=np.append(levels, levels[-1]), hold=True)
+
+
+def profile(points: Sequence[tuple[float, float]]) -> Reference:
+    """Piecewise-linear reference through (time s, position m) points (ramps and holds)."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 2 or np.any(np.diff(pts[:, 0]) < 0):
+        raise InputError("a profile is a list of (time, position) with time not decreasing")
+    return Reference(times=pts[:, 0], values=pts[:, 1], hold=False)
+
+
+# ---------------------------------------------------------------------- simulator
+class Simulator:
+    """Integrates a plant over intervals of constant command.
+
+    Parameters
+    ----------
+    plant : Plant
+    rtol, atol : CVODES tolerances (atol on states scaled to ~1).
+    params : parameter vector (default the plant's nominal ``p0``).
+    """
+
+    def __init__(self, plant: Plant, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL,
+                 params: Sequence[float] | None = None) -> None:
+        self.plant = plant
+        self.params = np.asarray(plant.p0 if params is None else params, dtype=float)
+        if self.params.shape != plant.p0.shape:
+            raise InputError(f"expected {len(plant.p0)} parameters, got {self.params.shape}")
+        self.scale = _scales(plant)
+        self.rtol, self.atol = rtol, atol
+        self._integrators: dict[int, ca.Function] = {}
+        nx = len(plant.states)
+        z = ca.SX.sym("z", nx)
+        up = ca.SX.sym("up", 2 + len(plant.p0))   # [duration, u, p...]
+        sc = ca.DM(self.scale)
+        xdot = plant.f(z * sc, up[1], up[2:])
+        self._dae = {"x": z, "p": up, "ode": up[0] * xdot / sc}
+
+    def _integrator(self, m: int) -> ca.Function:
+        if m not in self._integrators:
+            grid = list(np.arange(1, m + 1) / m)
+            opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": 100000,
+                    "print_stats": False}
+            self._integrators[m] = ca.integrator(f"F{m}", "cvodes", self._dae, 0.0, grid, opts)
+        return self._integrators[m]
+
+    def step(self, state: np.ndarray, u: float, duration: float, m: int = 1) -> np.ndarray:
+        """States at ``m`` equally spaced instants over ``duration`` s (last = end), (m, nx)."""
+        F = self._integrator(m)
+        pv = np.concatenate(([duration, u], self.params))
+        try:
+            res = F(x0=state / self.scale, p=pv)
+        except RuntimeError as exc:
+            raise WorkbenchError(f"integration failed over a {duration:g} s interval with "
+                                 f"u = {u:g} V: {str(exc).splitlines()[0]}") from None
+        return (np.asarray(res["xf"]).T) * self.scale
+
+    def outputs(self, states: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Outputs for rows of states and commands."""
+        hm = self.plant.h.map(states.shape[0])
+        return np.asarray(hm(states.T, np.asarray(u).reshape(1, -1),
+                             np.tile(self.params.reshape(-1, 1), (1, states.shape[0])))).T
+
+
+def _progress(total: int, desc: str, show: bool | None):
+    from tqdm.auto import tqdm
+    return tqdm(total=total, desc=desc, unit="step", disable=(None if show is None else not show),
+                leave=False, mininterval=0.5)
+
+
+def open_loop(plant: Plant, t: Sequence[float], u: Sequence[float],
+              x0: Sequence[float] | float | None = None, params: Sequence[float] | None = None,
+              rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL,
+              progress: bool | None = None) -> Trajectory:
+    """Simulate with a given command: u[k] held on [t[k], t[k+1]) (ZOH).
+
+    Parameters
+    ----------
+    t : sample times, s, strictly increasing. u : commands at those times, V.
+    x0 : full initial state, or a position (m) to start at rest in equilibrium.
+    params : parameter vector (default nominal).
+
+    Returns
+    -------
+    Trajectory sampled at ``t``.
+    """
+    t = np.asarray(t, dtype=float)
+    u = np.asarray(u, dtype=float)
+    if t.ndim != 1 or t.shape != u.shape or len(t) < 2:
+        raise InputError("t and u must be 1-D arrays of the same length (>= 2)")
+    if np.any(np.diff(t) <= 0):
+        raise InputError("time must be strictly increasing")
+    sim = Simulator(plant, rtol, atol, params)
+    state = _initial(plant, x0, u[0])
+    states = np.empty((len(t), len(state)))
+    states[0] = state
+    dts = np.diff(t)
+    with _progress(len(t) - 1, "simulate", progress) as bar:
+        for k in range(len(t) - 1):
+            state = sim.step(state, u[k], dts[k])[-1]
+            states[k + 1] = state
+            if k % 200 == 0:
+                bar.update(min(200, len(t) - 1 - k))
+    outs = sim.outputs(states, u)
+    return Trajectory(time=t, states=states, inputs=u.reshape(-1, 1), outputs=outs,
+                      state_names=plant.state_names, output_names=plant.output_names,
+                      units=_units(plant), info={"mode": "open_loop"})
+
+
+def _initial(plant: Plant, x0, u0: float | None) -> np.ndarray:
+    if x0 is None:
+        return plant.initial_state(0.5 * plant.stroke)
+    arr = np.atleast_1d(np.asarray(x0, dtype=float))
+    if arr.size == 1:
+        return plant.initial_state(float(arr[0]))
+    if arr.size != len(plant.states):
+        raise InputError(f"initial state has {arr.size} entries, the plant has "
+                         f"{len(plant.states)} states ({', '.join(plant.state_names)})")
+    return arr
+
+
+def _units(plant: Plant) -> dict[str, str]:
+    u = {s.name: s.unit for s in plant.states}
+    u.update({s.name: s.unit for s in plant.outputs})
+    u.update({"u": "V", "r": "m", "t": "s"})
+    return u
+
+
+def _quantise(value: float, step: float | None) -> float:
+    if not step:
+        return value
+    return float(np.round(value / step) * step)
+
+
+def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | Reference,
+                t_end: float | None = None, x0: Sequence[float] | float | None = None,
+                output_times: Sequence[float] | None = None, params: Sequence[float] | None = None,
+                position_resolution: float | None = None, command_resolution: float | None = None,
+                delay_samples: int = 0, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL,
+                progress: bool | None = None) -> Trajectory:
+    """Sampled-data closed loop: the controller samples every ``sample_time``.
+
+    At each sample t_k the controller reads the position (quantised by the ADC
+    step ``position_resolution``, m) and the reference r(t_k); its command is
+    clipped to the valve's [command_min, command_max], quantised by the DAC step
+    ``command_resolution`` (V), and held (ZOH) until the next sample
+    (``delay_samples`` samples later when computation takes time).
+
+    Parameters
+    ----------
+    reference : callable r(t) in m (e.g. :func:`steps`, :func:`profile`).
+    t_end : s; default the reference's duration.
+    x0 : full initial state, or a position (m) to start at rest; default r(0).
+    output_times : times (s) at which to report; default every sample.
+
+    Returns
+    -------
+    Trajectory at ``output_times`` with the command applied and the reference.
+    """
+    T = float(controller.sample_time)
+    if t_end is None:
+        t_end = getattr(reference, "duration", None)
+        if t_end is None:
+            raise InputError("give t_end for a reference without a duration")
+    prm = plant.params
+    u_min, u_max = prm["valve.command_min"], prm["valve.command_max"]
+    if position_resolution is None:
+        position_resolution = prm.get("controller.position_resolution")
+    if command_resolution is None:
+        command_resolution = prm.get("controller.command_resolution")
+    n_samples = int(np.floor(t_end / T + 1e-9))
+    t_ctrl = T * np.arange(n_samples + 1)
+    if output_times is None:
+        out_t = t_ctrl.copy()
+    else:
+        out_t = np.asarray(output_times, dtype=float)
+        if np.any(np.diff(out_t) <= 0):
+            raise InputError("output_times must be strictly increasing")
+    t0 = out_t[0]
+    t_ctrl = t0 + T * np.arange(int(np.floor((out_t[-1] - t0) / T + 1e-9)) + 1)
+    if x0 is None:
+        x0 = float(np.clip(reference(t0), 0.0, plant.stroke))
+    sim = Simulator(plant, rtol, atol, params)
+    state = _initial(plant, x0, None)
+    ix = plant.state_index("x")
+    iv = plant.state_index("v")
+
+    events = np.union1d(t_ctrl, out_t)
+    # merge events closer than 1e-9 s
+    keep = np.concatenate(([True], np.diff(events) > 1e-9))
+    events = events[keep]
+    is_ctrl = np.zeros(len(events), dtype=bool)
+    is_ctrl[np.clip(np.searchsorted(events, t_ctrl - 1e-9), 0, len(events) - 1)] = True
+    out_idx = np.clip(np.searchsorted(events, out_t - 1e-9), 0, len(events) - 1)
+
+    # fast path: the same number of output points in every control interval
+    ctrl_pos = np.flatnonzero(is_ctrl)
+    per = np.diff(ctrl_pos)
+    uniform = len(per) > 0 and np.all(per == per[0]) and ctrl_pos[-1] == len(events) - 1 \
+        and ctrl_pos[0] == 0
+    if uniform:
+        ev_dt = np.diff(events)
+        uniform = np.allclose(ev_dt, ev_dt[0], rtol=1e-9, atol=1e-12)
+
+    cstate = controller.reset()
+    pending = [None] * delay_samples
+    u_now = float(np.clip(state[plant.state_names.index("spool")], u_min, u_max)) \
+        if "spool" in plant.state_names else prm["valve.command_center"]
+    states = np.empty((len(events), len(state)))
+    u_hist = np.empty(len(events))
+    r_hist = np.empty(len(events))
+
+    def control_at(k_ev: int) -> None:
+        nonlocal cstate, u_now
+        y = {"x": _quantise(float(state[ix]), position_resolution), "v": float(state[iv])}
+        r = float(reference(events[k_ev]))
+        cstate, u_cmd = controller.update(cstate, r, y)
+        u_cmd = _quantise(float(np.clip(u_cmd, u_min, u_max)), command_resolution)
+        u_cmd = float(np.clip(u_cmd, u_min, u_max))
+        if delay_samples:
+            pending.append(u_cmd)
+            u_cmd = pending.pop(0)
+            if u_cmd is None:
+                u_cmd = u_now
+        u_now = u_cmd
+
+    with _progress(len(events) - 1, "closed loop", progress) as bar:
+        if uniform:
+            m = int(per[0])
+            dur = float(events[ctrl_pos[1]] - events[ctrl_pos[0]]) if len(ctrl_pos) > 1 else T
+            states[0] = state
+            for j, k in enumerate(ctrl_pos[:-1]):
+                control_at(k)
+                r_hist[k:k + m] = reference(events[k:k + m])
+                u_hist[k:k + m] = u_now
+                block = sim.step(state, u_now, dur, m)
+                states[k + 1:k + m + 1] = block
+                state = block[-1]
+                if j % 50 == 0:
+                    bar.update(min(50 * m, len(events) - 1 - k))
+            last = len(events) - 1
+            control_at(last)
+            u_hist[last], r_hist[last] = u_now, reference(events[last])
+        else:
+            for k in range(len(events)):
+                if is_ctrl[k]:
+                    control_at(k)
+                states[k] = state
+                u_hist[k] = u_now
+                r_hist[k] = reference(events[k])
+                if k + 1 < len(events):
+                    state = sim.step(state, u_now, events[k + 1] - events[k])[-1]
+                    if k % 200 == 0:
+                        bar.update(min(200, len(events) - 1 - k))
+
+    states, u_hist, r_hist = states[out_idx], u_hist[out_idx], r_hist[out_idx]
+    outs = sim.outputs(states, u_hist)
+    return Trajectory(time=out_t, states=states, inputs=u_hist.reshape(-1, 1), outputs=outs,
+                      state_names=plant.state_names, output_names=plant.output_names,
+                      reference=r_hist, units=_units(plant),
+                      info={"mode": "closed_loop", "sample_time": T})
