@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -557,7 +558,8 @@ def fit_signals(measured: Recording, model: Recording | Mapping[str, Any],
         if not np.all(gap <= tol):
             i = int(np.argmax(~(gap <= tol)))
             raise InputError(f"the model time base differs from the measurement: "
-                             f"t = {tm[i]!r} s vs {measured.t[i]!r} s at index {i}; "
+                             f"t = {float(tm[i])!r} s vs {float(measured.t[i])!r} s "
+                             f"at index {i}; "
                              "simulate on the recorded instants", source=src,
                              location="column 't'")
     if names is None:
@@ -690,7 +692,7 @@ def _validate(columns: tuple[str, ...], data: Mapping[str, np.ndarray],
         bad = ~np.isfinite(data[name])
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise InputError(f"value {data[name][i]} is not allowed: every value must be "
+            raise InputError(f"value {float(data[name][i])} is not allowed: every value must be "
                              f"a finite number ({int(bad.sum())} bad in this column)",
                              source=source, location=where.cell(name, i))
 
@@ -698,8 +700,8 @@ def _validate(columns: tuple[str, ...], data: Mapping[str, np.ndarray],
     steps = np.diff(t)
     if not np.all(steps > 0):
         i = int(np.flatnonzero(~(steps > 0))[0]) + 1
-        raise InputError(f"time is not strictly increasing: t = {t[i]!r} s at "
-                         f"{where.sample(i)} comes after t = {t[i - 1]!r} s at "
+        raise InputError(f"time is not strictly increasing: t = {float(t[i])!r} s at "
+                         f"{where.sample(i)} comes after t = {float(t[i - 1])!r} s at "
                          f"{where.sample(i - 1)}", source=source, location=where.cell("t", i))
 
     low, high = PRESSURE_RANGE
@@ -805,10 +807,15 @@ def _read_csv(path: Path) -> Recording:
             columns, sep = _parse_header(header, header_line, src)
             arrays = _fast_parse(fh, len(columns), sep)
         where = _CsvWhere(path, header_line, meta_lines)
-        if isinstance(arrays, int):
-            # Rows before this one parsed cleanly: check only its line, which raises.
-            _slow_parse(path, header_line, columns, sep, src, only_row=arrays)
-            arrays = None  # not reached unless pandas and Python disagree on the row
+        if isinstance(arrays, tuple):
+            # pandas pointed at one bad row: check only that line, which raises ...
+            kind, k = arrays
+            if kind == "row":
+                _slow_parse(path, header_line, columns, sep, src, only_row=k)
+            else:
+                _slow_parse(path, header_line, columns, sep, src,
+                            only_line=header_line + k)
+            arrays = None  # ... unless pandas and Python disagree: then scan it all
         if arrays is None:
             arrays, where.row_lines = _slow_parse(path, header_line, columns, sep, src)
     except UnicodeDecodeError as exc:
@@ -893,38 +900,62 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _fast_parse(fh: Any, ncols: int, sep: str | None) -> list[np.ndarray] | int | None:
+def _fast_parse(fh: Any, ncols: int, sep: str | None
+                ) -> list[np.ndarray] | tuple[str, int] | None:
     """Parse the data rows with pandas' C reader.
 
-    Returns the columns; or the index of the first data row holding a NaN/inf (which
-    may also be a row with too few cells); or None if pandas failed or found the wrong
-    number of columns. In the last two cases the slow path finds and reports the line.
+    Returns the columns as float64 arrays; or ``("row", i)``, the 0-based index of the
+    first data row that is not all finite numbers (a NaN/inf, a text or empty cell, too
+    few cells); or ``("line", k)`` when pandas stopped at the k-th line after the header
+    (too many cells); or None if pandas failed otherwise or found the wrong number of
+    columns. The caller checks the suspect row with the slow parser, which reports it.
     """
+    import warnings
+
     import pandas as pd
+    from pandas.api import types
 
     try:
-        frame = pd.read_csv(fh, sep=sep if sep else r"\s+", header=None, engine="c",
-                            dtype=np.float64, comment="#", skip_blank_lines=True,
-                            keep_default_na=False, na_values=[], index_col=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", pd.errors.DtypeWarning)  # mixed: text cells
+            frame = pd.read_csv(fh, sep=sep if sep else r"\s+", header=None,
+                                engine="c", comment="#", skip_blank_lines=True,
+                                index_col=False)
     except UnicodeDecodeError:
         raise
+    except pd.errors.ParserError as exc:
+        match = re.search(r"Expected \d+ fields in line (\d+)", str(exc))
+        return ("line", int(match.group(1))) if match else None
     except Exception:  # malformed somewhere: the slow path finds and reports where
         return None
     if frame.shape[1] != ncols or frame.shape[0] < 1:
         return None
-    values = frame.to_numpy(dtype=np.float64)
-    finite = np.isfinite(values).all(axis=1)
+    arrays = []
+    for k in range(ncols):
+        col = frame.iloc[:, k]
+        if types.is_bool_dtype(col.dtype):
+            arr = np.full(col.shape[0], np.nan)  # True/False: report the first row
+        elif types.is_numeric_dtype(col.dtype):
+            arr = col.to_numpy(dtype=np.float64)
+        else:  # text somewhere in the column: NaN where a cell is not a number
+            arr = pd.to_numeric(col, errors="coerce").to_numpy(dtype=np.float64,
+                                                               na_value=np.nan)
+        arrays.append(arr)
+    finite = np.ones(frame.shape[0], dtype=bool)
+    for arr in arrays:
+        finite &= np.isfinite(arr)
     if not finite.all():
-        return int(np.argmin(finite))  # first row with a NaN/inf (or a short row)
-    return [values[:, k] for k in range(ncols)]
+        return ("row", int(np.argmin(finite)))
+    return arrays
 
 
 def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | None,
-                src: str, only_row: int | None = None
+                src: str, only_row: int | None = None, only_line: int | None = None
                 ) -> tuple[list[np.ndarray], list[int]]:
     """Parse row by row, raising on the first bad line; also return each row's line.
 
-    With ``only_row``, skip (without parsing) to that 0-based data row and check it.
+    With ``only_row`` (0-based data row) or ``only_line`` (1-based file line), skip to
+    that row without parsing the others, and check only it.
     """
     ncols = len(columns)
     rows: list[list[float]] = []
@@ -939,6 +970,8 @@ def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | Non
                 continue
             count += 1
             if only_row is not None and count != only_row:
+                continue
+            if only_line is not None and lineno != only_line:
                 continue
             cells = text.split(sep) if sep else text.split()
             if len(cells) != ncols:
@@ -964,7 +997,7 @@ def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | Non
                 row.append(value)
             rows.append(row)
             row_lines.append(lineno)
-            if only_row is not None:
+            if only_row is not None or only_line is not None:
                 break
     if not rows:
         raise InputError(f"no data rows after the header (line {header_line}): a "

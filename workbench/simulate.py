@@ -417,3 +417,115 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
                       state_names=plant.state_names, output_names=plant.output_names,
                       reference=r_hist, units=_units(plant),
                       info={"mode": "closed_loop", "sample_time": T})
+
+
+# ---------------------------------------------------------------------- compiled loop
+class CompiledLoop:
+    """The whole sampled-data PID loop as one CasADi function (fast path).
+
+    Each control period is integrated with ``substeps`` steps of the L-stable
+    second-order Rosenbrock method ROS2 (Verwer et al. 1999, gamma = 1 + 1/sqrt 2),
+    linearly implicit with the exact CasADi Jacobian, so stiff chamber dynamics near
+    an end stop or a pressure ratio of 1 do not limit the step. The controller law,
+    clipping and DAC/ADC quantisation are the same as :func:`closed_loop`; the
+    N-period loop is a ``mapaccum`` and is compiled to C when a compiler is present
+    (``jit=True``), else run in CasADi's virtual machine.
+
+    Accuracy is checked against scipy Radau (rtol 1e-9) in the tests: the default
+    10 substeps per 10 ms stay well inside 0.1 % of stroke on the reference plants.
+    """
+
+    def __init__(self, plant: Plant, controller, substeps: int = 10, jit: bool = False,
+                 params: Sequence[float] | None = None,
+                 position_resolution: float | None = None,
+                 command_resolution: float | None = None) -> None:
+        from .controllers.pd import PID
+        if not isinstance(controller, PID):
+            raise InputError("the compiled loop runs the plant file's P/PD/PID controller only")
+        self.plant, self.controller, self.substeps = plant, controller, int(substeps)
+        self.params = np.asarray(plant.p0 if params is None else params, dtype=float)
+        prm = plant.params
+        pos_res = position_resolution or prm.get("controller.position_resolution")
+        cmd_res = command_resolution or prm.get("controller.command_resolution")
+        nx = len(plant.states)
+        T = controller.sample_time
+        h = T / self.substeps
+        xs = ca.SX.sym("x", nx)
+        cs = ca.SX.sym("c", 3)     # e_prev, integral, first-sample flag
+        r = ca.SX.sym("r")
+        p = ca.SX.sym("p", len(self.params))
+        ix = plant.state_index("x")
+        y = xs[ix] if not pos_res else ca.floor(xs[ix] / pos_res + 0.5) * pos_res
+        e = r - y
+        e_prev = ca.if_else(cs[2] > 0, cs[0], e)
+        c = controller
+        u_free = c.u_center + c.kp * e + c.kd * (e - e_prev) / T
+        integ = cs[1] + e * T
+        u_try = u_free + c.ki * integ
+        sat = ca.logic_or(u_try <= c.u_min, u_try >= c.u_max) if c.ki else 0
+        integ = ca.if_else(sat, cs[1], integ) if c.ki else integ
+        u = u_free + c.ki * integ
+        lo, hi = prm["valve.command_min"], prm["valve.command_max"]
+        u = ca.fmin(ca.fmax(u, lo), hi)
+        if cmd_res:
+            u = ca.fmin(ca.fmax(ca.floor(u / cmd_res + 0.5) * cmd_res, lo), hi)
+        # ROS2 substep as a function
+        z = ca.SX.sym("z", nx)
+        uu = ca.SX.sym("uu")
+        fz = plant.f(z, uu, p)
+        J = ca.jacobian(fz, z)
+        g = 1.0 + 1.0 / np.sqrt(2.0)
+        W = ca.SX.eye(nx) - g * h * J
+        k1 = ca.solve(W, fz)
+        k2 = ca.solve(W, plant.f(z + h * k1, uu, p) - 2.0 * k1)
+        ros2 = ca.Function("ros2", [z, uu, p], [z + 1.5 * h * k1 + 0.5 * h * k2])
+        traj = []
+        zk = xs
+        for _ in range(self.substeps):
+            zk = ros2(zk, u, p)
+            traj.append(zk)
+        cnext = ca.vertcat(e, integ, 1.0)
+        self.step = ca.Function("period", [ca.vertcat(xs, cs), r, p],
+                                [ca.vertcat(zk, cnext), ca.horzcat(*traj), u])
+        self._jit = jit
+        self._loops: dict[int, ca.Function] = {}
+
+    def _loop(self, n: int) -> ca.Function:
+        if n not in self._loops:
+            opts = {}
+            if self._jit:
+                opts = {"jit": True, "compiler": "shell",
+                        "jit_options": {"flags": ["-O2"], "verbose": False}}
+            acc = self.step.mapaccum("loop", n, [0], [0])
+            xa = ca.MX.sym("xa", self.step.size1_in(0))
+            rr = ca.MX.sym("r", 1, n)
+            pp = ca.MX.sym("p", len(self.params))
+            res = acc(xa, rr, ca.repmat(pp, 1, n))
+            self._loops[n] = ca.Function("loop_n", [xa, rr, pp], res, opts)
+        return self._loops[n]
+
+    def run(self, reference, t_end: float, x0) -> Trajectory:
+        """Simulate to ``t_end``; outputs at every substep (states) with u held."""
+        T = self.controller.sample_time
+        n = int(np.floor(t_end / T + 1e-9))
+        t_ctrl = T * np.arange(n)
+        r = np.asarray(reference(t_ctrl), dtype=float).reshape(1, -1)
+        state = _initial(self.plant, x0, None)
+        xa0 = np.concatenate((state, [0.0, 0.0, 0.0]))
+        _, traj, u = self._loop(n)(xa0, r, self.params)
+        traj = np.asarray(traj)               # nx x (n * substeps)
+        u = np.asarray(u).ravel()
+        m = self.substeps
+        states = np.vstack((state, traj.T))
+        t = np.concatenate(([0.0], (np.arange(1, n * m + 1)) * (T / m)))
+        u_full = np.concatenate((np.repeat(u, m), [u[-1]]))
+        r_full = np.concatenate((np.repeat(r.ravel(), m), [r.ravel()[-1]]))
+        sim = Simulator.__new__(Simulator)
+        sim.plant, sim.params = self.plant, self.params
+        outs = Simulator.outputs(sim, states, u_full)
+        return Trajectory(time=t, states=states, inputs=u_full.reshape(-1, 1), outputs=outs,
+                          state_names=self.plant.state_names,
+                          output_names=self.plant.output_names, reference=r_full,
+                          units=_units(self.plant),
+                          info={"mode": "closed_loop", "method": "ros2-compiled",
+                                "substeps": m, "sample_time": T})
