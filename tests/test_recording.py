@@ -300,7 +300,7 @@ def test_line_numbers_count_blank_and_comment_lines(tmp_path):
             + ROWS[0] + "\n\n# a note in the data\n" + ROWS[1] + "  # trailing note\n"
             + "0.001,5.2,0.252,313700.0,313500.0,0.25\n")
     path = write(tmp_path, text)
-    with raises(path, r", line 10, column 't': .*comes after t = 0.001 s at line 8"):
+    with raises(path, r", line 9, column 't': .*comes after t = 0.001 s at line 8"):
         load_recording(path)
 
 

@@ -692,8 +692,9 @@ def _validate(columns: tuple[str, ...], data: Mapping[str, np.ndarray],
         bad = ~np.isfinite(data[name])
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise InputError(f"value {float(data[name][i])} is not allowed: every value must be "
-                             f"a finite number ({int(bad.sum())} bad in this column)",
+            raise InputError(f"value {float(data[name][i])} is not allowed: every value "
+                             f"must be a finite number ({int(bad.sum())} bad in this "
+                             "column)",
                              source=source, location=where.cell(name, i))
 
     t = data["t"]
