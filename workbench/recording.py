@@ -108,9 +108,6 @@ class _CsvWhere(_Where):
     def header(self) -> str:
         return f"line {self.header_line} (header)"
 
-    def column(self, name: str) -> str:
-        return f"column '{name}'"
-
     def sample(self, index: int) -> str:
         return f"line {self._line_of(index)}"
 
