@@ -490,8 +490,11 @@ class CompiledLoop:
         if n not in self._loops:
             opts = {}
             if self._jit:
-                opts = {"jit": True, "compiler": "shell",
-                        "jit_options": {"flags": ["-O2"], "verbose": False}}
+                import tempfile
+                opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
+                        "jit_name": "workbench_loop",
+                        "jit_options": {"flags": ["-O2"], "verbose": False,
+                                        "directory": tempfile.gettempdir()}}
             acc = self.step.mapaccum("loop", n, [0], [0])
             xa = ca.MX.sym("xa", self.step.size1_in(0))
             rr = ca.MX.sym("r", 1, n)
