@@ -98,7 +98,6 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from .plant import Plant
     from .recording import Recording, fit_signals
-    from . import controllers, simulate
     plant = Plant.from_toml(args.plant)
     rec = Recording.load(args.recording)
     out_dir = Path(args.out)
@@ -165,16 +164,9 @@ def _as_recording_columns(run, rec):
             data[c] = np.asarray(rec[c], dtype=float)
     meta = dict(rec.metadata)
     meta["simulated_by"] = "workbench simulate"
-    return Recording(columns=tuple(rec.columns), data=_readonly(data, rec.t),
-                     metadata=meta, source="<simulation>")
-
-
-def _readonly(data, t):
-    out = {"t": np.array(t, dtype=float)}
-    out.update({k: np.array(v, dtype=float) for k, v in data.items()})
-    for v in out.values():
-        v.flags.writeable = False
-    return out
+    data["t"] = rec.t
+    return Recording(columns=tuple(rec.columns), data=data, metadata=meta,
+                     source="<simulation>")
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:

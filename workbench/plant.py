@@ -105,11 +105,9 @@ class Plant:
         self.p_sym = ca.SX.sym("p", npar)
         xdot, y = self._build(self.x_sym, self.u_sym, self.p_sym, friction, underlap=0.0)
         self.xdot_expr, self.y_expr = xdot, y
-        names = dict(name_in=["x", "u", "p"])
-        self.f = ca.Function("f", [self.x_sym, self.u_sym, self.p_sym], [xdot],
-                             names["name_in"], ["xdot"])
-        self.h = ca.Function("h", [self.x_sym, self.u_sym, self.p_sym], [y],
-                             names["name_in"], ["y"])
+        args = [self.x_sym, self.u_sym, self.p_sym]
+        self.f = ca.Function("f", args, [xdot], ["x", "u", "p"], ["xdot"])
+        self.h = ca.Function("h", args, [y], ["x", "u", "p"], ["y"])
 
     # ---------------------------------------------------------------- construction
     @classmethod

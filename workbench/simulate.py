@@ -215,9 +215,14 @@ class Simulator:
 
     def outputs(self, states: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Outputs for rows of states and commands."""
-        hm = self.plant.h.map(states.shape[0])
-        return np.asarray(hm(states.T, np.asarray(u).reshape(1, -1),
-                             np.tile(self.params.reshape(-1, 1), (1, states.shape[0])))).T
+        return _outputs(self.plant, self.params, states, u)
+
+
+def _outputs(plant: Plant, params: np.ndarray, states: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Plant outputs for rows of states and commands, (N, ny)."""
+    hm = plant.h.map(states.shape[0])
+    return np.asarray(hm(states.T, np.asarray(u).reshape(1, -1),
+                         np.tile(params.reshape(-1, 1), (1, states.shape[0])))).T
 
 
 def _progress(total: int, desc: str, show: bool | None):
@@ -249,7 +254,7 @@ def open_loop(plant: Plant, t: Sequence[float], u: Sequence[float],
     if np.any(np.diff(t) <= 0):
         raise InputError("time must be strictly increasing")
     sim = Simulator(plant, rtol, atol, params)
-    state = _initial(plant, x0, u[0])
+    state = _initial(plant, x0)
     states = np.empty((len(t), len(state)))
     states[0] = state
     dts = np.diff(t)
@@ -265,7 +270,7 @@ def open_loop(plant: Plant, t: Sequence[float], u: Sequence[float],
                       units=_units(plant), info={"mode": "open_loop"})
 
 
-def _initial(plant: Plant, x0, u0: float | None) -> np.ndarray:
+def _initial(plant: Plant, x0) -> np.ndarray:
     if x0 is None:
         return plant.initial_state(0.5 * plant.stroke)
     arr = np.atleast_1d(np.asarray(x0, dtype=float))
@@ -339,7 +344,7 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
     if x0 is None:
         x0 = float(np.clip(reference(t0), 0.0, plant.stroke))
     sim = Simulator(plant, rtol, atol, params)
-    state = _initial(plant, x0, None)
+    state = _initial(plant, x0)
     ix = plant.state_index("x")
     iv = plant.state_index("v")
 
@@ -509,7 +514,7 @@ class CompiledLoop:
         n = int(np.floor(t_end / T + 1e-9))
         t_ctrl = T * np.arange(n)
         r = np.asarray(reference(t_ctrl), dtype=float).reshape(1, -1)
-        state = _initial(self.plant, x0, None)
+        state = _initial(self.plant, x0)
         xa0 = np.concatenate((state, [0.0, 0.0, 0.0]))
         _, traj, u = self._loop(n)(xa0, r, self.params)
         traj = np.asarray(traj)               # nx x (n * substeps)
@@ -519,9 +524,7 @@ class CompiledLoop:
         t = np.concatenate(([0.0], (np.arange(1, n * m + 1)) * (T / m)))
         u_full = np.concatenate((np.repeat(u, m), [u[-1]]))
         r_full = np.concatenate((np.repeat(r.ravel(), m), [r.ravel()[-1]]))
-        sim = Simulator.__new__(Simulator)
-        sim.plant, sim.params = self.plant, self.params
-        outs = Simulator.outputs(sim, states, u_full)
+        outs = _outputs(self.plant, self.params, states, u_full)
         return Trajectory(time=t, states=states, inputs=u_full.reshape(-1, 1), outputs=outs,
                           state_names=self.plant.state_names,
                           output_names=self.plant.output_names, reference=r_full,
