@@ -242,3 +242,144 @@ def test_replace_validates_like_a_file():
     with pytest.raises(InputError, match="effect 'valve_dynamics'"):
         params.replace(**{"valve.damping": None})
     assert "valve_dynamics" not in params.without_effect("valve_dynamics").effects
+
+
+# ---------------------------------------------------------------------- valve law
+AFFINE_FILE = DATA / "input_affine.toml"
+#: Keys selecting the input-affine law, as written in the test data file.
+AFFINE = {f"valve.{k}": v for k, v in tomllib.loads(AFFINE_FILE.read_text(encoding="utf-8"))
+          ["valve"].items() if k == "law" or k.startswith("affine_")}
+
+
+def test_valve_law_defaults_to_iso6358_and_is_not_written():
+    params = PlantParams.from_toml(PLANTS / "rig25_mpye.toml")
+    assert params["valve.law"] == "iso6358"
+    # An existing file gains no key on a round trip: the default is not written.
+    assert "valve.law" not in params.values
+    assert "law" not in params.to_dict()["valve"]
+
+
+def test_round_trip_of_the_input_affine_keys(tmp_path):
+    written = tomllib.loads(AFFINE_FILE.read_text(encoding="utf-8"))
+    first = PlantParams.from_toml(AFFINE_FILE)
+    assert first["valve.law"] == "input_affine"
+    for name in ("affine_phi", "affine_psi_in", "affine_psi_out", "affine_gamma"):
+        # Stored as a tuple of floats, entry for entry what the file says.
+        assert first[f"valve.{name}"] == tuple(written["valve"][name])
+        assert all(type(c) is float for c in first[f"valve.{name}"])
+    out = tmp_path / "again.toml"
+    first.to_toml(out)
+    second = PlantParams.from_toml(out)
+    assert dict(second.values) == dict(first.values)   # exact: TOML floats round-trip
+    assert tomllib.loads(out.read_text())["valve"]["affine_psi_in"] == written["valve"]["affine_psi_in"]
+
+
+def test_integer_coefficients_are_accepted_as_floats(tmp_path):
+    path = write_plant(tmp_path / "p.toml", overrides={**AFFINE, "valve.affine_gamma": [1, 0]})
+    assert PlantParams.from_toml(path)["valve.affine_gamma"] == (1.0, 0.0)
+
+
+def test_indexed_access_and_replace_of_one_coefficient():
+    params = PlantParams.from_toml(AFFINE_FILE)
+    assert params["valve.affine_psi_in[2]"] == params["valve.affine_psi_in"][2]
+    new = params.replace(**{"valve.affine_psi_in[2]": 0.5})
+    assert new["valve.affine_psi_in"][2] == 0.5
+    assert new["valve.affine_psi_in"][:2] == params["valve.affine_psi_in"][:2]
+    with pytest.raises(KeyError, match="has 6 entries, no index 6"):
+        params["valve.affine_psi_in[6]"]
+    with pytest.raises(InputError, match=re.escape("[valve] affine_phi: no entry 3 to change")):
+        params.replace(**{"valve.affine_phi[3]": 1e-5})
+
+
+def test_switching_the_law_back_needs_the_coefficients_removed():
+    params = PlantParams.from_toml(AFFINE_FILE)
+    with pytest.raises(InputError, match="applies only with law = 'input_affine'"):
+        params.replace(**{"valve.law": "iso6358"})
+    iso = params.replace(**{k: None for k in AFFINE})
+    assert iso["valve.law"] == "iso6358"
+
+
+def test_unknown_valve_law_with_hint(tmp_path):
+    path = write_plant(tmp_path / "p.toml", overrides={**AFFINE, "valve.law": "input-affine"})
+    with pytest.raises(InputError, match=_prefix(path, "[valve] law")) as exc:
+        PlantParams.from_toml(path)
+    msg = str(exc.value)
+    assert "expected one of 'iso6358', 'input_affine', got 'input-affine'" in msg
+    assert "(did you mean 'input_affine'?)" in msg
+
+
+def test_valve_law_must_be_a_string(tmp_path):
+    path = write_plant(tmp_path / "p.toml", overrides={"valve.law": 2})
+    with pytest.raises(InputError, match=_prefix(path, "[valve] law")) as exc:
+        PlantParams.from_toml(path)
+    assert "expected a string, got 2" in str(exc.value)
+
+
+def test_unknown_affine_key_with_did_you_mean(tmp_path):
+    overrides = {**AFFINE, "valve.affine_psi_in": DELETE, "valve.affine_psi_inn": [1.0]}
+    path = write_plant(tmp_path / "p.toml", overrides=overrides)
+    with pytest.raises(InputError, match=_prefix(path, "[valve] affine_psi_inn")) as exc:
+        PlantParams.from_toml(path)
+    assert "did you mean 'affine_psi_in'?" in str(exc.value)
+
+
+@pytest.mark.parametrize("value, expected", [
+    ([0.08, "a", 0.01], "got 'a' (str) at index 1"),
+    ([0.08, True], "got True (bool) at index 1"),
+    ([0.08, float("nan")], "got nan at index 1"),
+    ([float("inf")], "got inf at index 0"),
+    (0.08, "got 0.08 (float)"),
+    ("0.08, 0.01", "got '0.08, 0.01' (str)"),
+    ([], "got 0 entries"),
+    ([0.01] * 17, "got 17 entries"),
+    ([[0.08], [0.01]], "got [0.08] (list) at index 0"),
+])
+def test_bad_coefficient_arrays(tmp_path, value, expected):
+    path = write_plant(tmp_path / "p.toml", overrides={**AFFINE, "valve.affine_psi_in": value})
+    with pytest.raises(InputError, match=_prefix(path, "[valve] affine_psi_in")) as exc:
+        PlantParams.from_toml(path)
+    msg = str(exc.value)
+    assert "expected an array of 1 to 16 finite numbers (kg/s)" in msg
+    assert expected in msg
+
+
+def test_gamma_has_a_shorter_length_limit(tmp_path):
+    path = write_plant(tmp_path / "p.toml", overrides={**AFFINE, "valve.affine_gamma": [1.0] * 9})
+    with pytest.raises(InputError, match=_prefix(path, "[valve] affine_gamma")) as exc:
+        PlantParams.from_toml(path)
+    assert "expected an array of 1 to 8 finite numbers, got 9 entries" in str(exc.value)
+
+
+@pytest.mark.parametrize("missing", ["affine_phi", "affine_psi_in", "affine_psi_out",
+                                     "affine_gamma"])
+def test_input_affine_law_needs_every_coefficient(tmp_path, missing):
+    path = write_plant(tmp_path / "p.toml", overrides={**AFFINE, f"valve.{missing}": DELETE})
+    with pytest.raises(InputError, match=_prefix(path, f"[valve] {missing}")) as exc:
+        PlantParams.from_toml(path)
+    msg = str(exc.value)
+    assert "missing; law = 'input_affine' needs all of affine_phi, affine_psi_in, " \
+           "affine_psi_out, affine_gamma" in msg
+    assert "expected an array of" in msg
+
+
+@pytest.mark.parametrize("law", ["iso6358", None])
+def test_coefficients_without_the_input_affine_law_are_an_error(tmp_path, law):
+    # Decided: an error, not a warning. A coefficient the ISO law would ignore is
+    # most likely a forgotten `law = "input_affine"`, and nothing is guessed silently.
+    overrides = {"valve.affine_gamma": [1.0, 0.0]}
+    if law is not None:
+        overrides["valve.law"] = law
+    path = write_plant(tmp_path / "p.toml", overrides=overrides)
+    with pytest.raises(InputError, match=_prefix(path, "[valve] affine_gamma")) as exc:
+        PlantParams.from_toml(path)
+    msg = str(exc.value)
+    assert "applies only with law = 'input_affine', but this valve's law is 'iso6358'" in msg
+    assert ("(the default)" in msg) == (law is None)
+    assert 'set [valve] law = "input_affine" or remove' in msg
+
+
+def test_gamma_identically_zero_is_an_error(tmp_path):
+    path = write_plant(tmp_path / "p.toml", overrides={**AFFINE, "valve.affine_gamma": [0.0, 0]})
+    with pytest.raises(InputError, match=_prefix(path, "[valve] affine_gamma")) as exc:
+        PlantParams.from_toml(path)
+    assert "at least one nonzero coefficient" in str(exc.value)

@@ -11,6 +11,24 @@ Examples
 >>> params = PlantParams.from_toml("designs/plants/situm_rodless.toml")  # doctest: +SKIP
 >>> params.effects                                                        # doctest: +SKIP
 ()
+
+Valve law (extra optional keys; formats.md defines none, so files without them load
+unchanged and describe the four-edge ISO 6358 valve)::
+
+    [valve]
+    law = "input_affine"          # or "iso6358" (the default)
+    affine_phi = [0.0]            # kg/s: phi(p), leakage at every command
+    affine_psi_in = [...]         # kg/s per unit Gamma: psi(p) while Gamma > 0 (inlet)
+    affine_psi_out = [...]        # kg/s per unit Gamma: psi(p) while Gamma < 0 (exhaust)
+    affine_gamma = [1.0, 0.0]     # -: Gamma(s) = g1 s + g2 s|s| + ..., s normalised opening
+
+The polynomials are in the port pressure in bar, p / 1e5 Pa (absolute), lowest power
+first; s is the valve's signed effective opening in [-1, 1] ((u - command_center -
+null_offset) / command_span, clipped, after the deadband). Port a follows
+q_a = phi(p_a) + psi(p_a, sgn Gamma) Gamma(s), port b the same law with Gamma(-s)
+(paper 003's approximation II, see :func:`workbench.physics.valve.affine_port_flows`).
+With the input-affine law, ``sonic_conductance`` and ``critical_pressure_ratio`` are
+still required (they describe the datasheet valve) but do not enter the dynamics.
 """
 
 from __future__ import annotations
@@ -34,6 +52,8 @@ __all__ = [
     "EFFECTS",
     "EFFECT_NAMES",
     "CONTROLLER_KINDS",
+    "VALVE_LAWS",
+    "AFFINE_KEYS",
     "PlantParams",
 ]
 
@@ -48,8 +68,9 @@ class Key:
         Where the key lives: ``[section] name = ...``.
     unit : str
         SI unit (``"-"`` when dimensionless).
-    kind : {"float", "int", "str"}
-        Expected TOML type (integers are accepted for floats).
+    kind : {"float", "int", "str", "floats"}
+        Expected TOML type (integers are accepted for floats); ``"floats"`` is an
+        array of finite numbers (stored as a tuple of floats).
     required : bool
         Must be present in every plant file.
     low, high : float or None
@@ -64,6 +85,11 @@ class Key:
         Value used when an optional non-effect key is absent.
     doc : str
         One line of explanation, used in error messages and ``check``.
+    min_items, max_items : int
+        Admissible array length (``kind = "floats"`` only).
+    law : str or None
+        Valve law (:data:`VALVE_LAWS`) the key belongs to: it enters the dynamics
+        only under that law, and ``None`` means under every law.
     """
 
     section: str
@@ -79,6 +105,9 @@ class Key:
     physical: bool = True
     default: Any = None
     doc: str = ""
+    min_items: int = 1
+    max_items: int = 16
+    law: str | None = None
 
     @property
     def path(self) -> str:
@@ -89,6 +118,11 @@ class Key:
         """Human description of an admissible value."""
         if self.kind == "str":
             return "a string"
+        if self.kind == "floats":
+            what = f"an array of {self.min_items} to {self.max_items} finite numbers"
+            if self.unit and self.unit != "-":
+                what += f" ({self.unit})"
+            return what
         if self.kind == "int":
             what = "an integer"
         else:
@@ -128,14 +162,25 @@ SCHEMA: tuple[Key, ...] = (
        doc="volume of the reservoir between regulator and valve"),
     _k("supply", "regulator_conductance", "m^3/(s Pa)", required=False,
        effect="supply_droop", **_POS, doc="sonic conductance of the regulator"),
-    _k("valve", "sonic_conductance", "m^3/(s Pa)", **_POS,
+    _k("valve", "sonic_conductance", "m^3/(s Pa)", **_POS, law="iso6358",
        doc="ISO 6358 sonic conductance C of one fully open edge"),
     _k("valve", "critical_pressure_ratio", "-", low=0.0, high=1.0, low_open=True,
-       high_open=True, doc="ISO 6358 critical pressure ratio b"),
+       high_open=True, law="iso6358", doc="ISO 6358 critical pressure ratio b"),
     _k("valve", "command_center", "V", doc="command that centres the spool"),
     _k("valve", "command_span", "V", **_POS, doc="|u - centre| that opens an edge fully"),
     _k("valve", "command_min", "V", physical=False, doc="lowest command the drive accepts"),
     _k("valve", "command_max", "V", physical=False, doc="highest command the drive accepts"),
+    _k("valve", "law", "", kind="str", required=False, physical=False, default="iso6358",
+       doc="valve flow law: 'iso6358' (four ISO 6358 edges) or 'input_affine' "
+           "(paper 003: q = phi(p) + psi(p, sgn Gamma) Gamma(s))"),
+    _k("valve", "affine_phi", "kg/s", kind="floats", required=False, law="input_affine",
+       doc="phi(p): port flow at every command, ascending powers of p/1e5 Pa"),
+    _k("valve", "affine_psi_in", "kg/s", kind="floats", required=False, law="input_affine",
+       doc="psi(p) while Gamma > 0 (inlet), kg/s per unit Gamma, powers of p/1e5 Pa"),
+    _k("valve", "affine_psi_out", "kg/s", kind="floats", required=False, law="input_affine",
+       doc="psi(p) while Gamma < 0 (exhaust), kg/s per unit Gamma, powers of p/1e5 Pa"),
+    _k("valve", "affine_gamma", "-", kind="floats", required=False, law="input_affine",
+       max_items=8, doc="Gamma(s) = sum g_k s|s|^(k-1) of the normalised opening s"),
     _k("valve", "deadband", "-", required=False, effect="valve_deadband", low=0.0,
        high=1.0, high_open=True, doc="spool overlap as a fraction of the span"),
     _k("valve", "null_offset", "V", required=False, effect="valve_offset",
@@ -192,6 +237,8 @@ TOP_LEVEL: tuple[Key, ...] = (
 REQUIRED_SECTIONS = ("gas", "supply", "valve", "cylinder", "load")
 OPTIONAL_SECTIONS = ("friction", "lines", "leakage", "controller")
 CONTROLLER_KINDS = ("p", "pd", "pid")
+#: Valve flow laws a plant file may select with ``[valve] law``.
+VALVE_LAWS = ("iso6358", "input_affine")
 
 #: Effect name -> keys that describe it (formats.md section 2).
 EFFECTS: dict[str, tuple[Key, ...]] = {}
@@ -207,6 +254,17 @@ EFFECT_NAMES: tuple[str, ...] = (
 _ANY_KEY_EFFECTS = {"leakage"}
 
 _BY_PATH = {k.path: k for k in SCHEMA}
+#: Keys of the input-affine valve law, all required when it is selected.
+AFFINE_KEYS: tuple[Key, ...] = tuple(k for k in SCHEMA if k.law == "input_affine")
+
+
+def _split_index(path: str) -> tuple[str, int | None]:
+    """``"valve.affine_phi[2]"`` -> ``("valve.affine_phi", 2)``; plain paths -> (path, None)."""
+    if path.endswith("]") and "[" in path:
+        base, _, idx = path[:-1].rpartition("[")
+        if idx.isdigit():
+            return base, int(idx)
+    return path, None
 
 
 def _fmt_path(path: str) -> str:
@@ -307,8 +365,16 @@ class PlantParams:
 
     # ---------------------------------------------------------------- access
     def __getitem__(self, path: str) -> Any:
+        """Value of a dotted key; ``"valve.affine_phi[2]"`` picks one array entry."""
         if path in self.values:
             return self.values[path]
+        base, idx = _split_index(path)
+        if idx is not None and base in self.values and _BY_PATH[base].kind == "floats":
+            arr = self.values[base]
+            if idx >= len(arr):
+                raise KeyError(f"plant parameter '{base}' has {len(arr)} entries, "
+                               f"no index {idx}")
+            return arr[idx]
         key = _BY_PATH.get(path)
         if key is None:
             raise KeyError(f"no plant parameter '{path}'")
@@ -347,7 +413,9 @@ class PlantParams:
         """A copy with dotted keys changed (``None`` removes an optional key).
 
         The result is validated like a file, so an effect can be switched on by
-        giving all its keys, and off by removing them.
+        giving all its keys, and off by removing them. One entry of an array key
+        is changed by its indexed name, e.g. ``"valve.affine_psi_in[2]"`` (the names
+        of :attr:`workbench.Plant.param_names`).
 
         Examples
         --------
@@ -355,7 +423,16 @@ class PlantParams:
         """
         new = dict(self.values)
         for path, val in changes.items():
-            if val is None:
+            base, idx = _split_index(path)
+            if idx is not None and base in _BY_PATH and _BY_PATH[base].kind == "floats":
+                if base not in new or idx >= len(new[base]):
+                    raise InputError(f"no entry {idx} to change (the array has "
+                                     f"{len(new.get(base, ()))})", source=self.source,
+                                     location=_fmt_path(base))
+                arr = list(new[base])
+                arr[idx] = val
+                new[base] = arr
+            elif val is None:
                 new.pop(path, None)
             else:
                 new[path] = val
@@ -379,12 +456,15 @@ def _nest(values: Mapping[str, Any], name: str) -> dict[str, Any]:
     out: dict[str, Any] = {"name": name}
     for key in SCHEMA:
         if key.path in values:
-            out.setdefault(key.section, {})[key.name] = values[key.path]
+            val = values[key.path]
+            out.setdefault(key.section, {})[key.name] = list(val) if key.kind == "floats" else val
     return out
 
 
 def _check_value(key: Key, raw: Any, source: str) -> Any:
     loc = _fmt_path(key.path)
+    if key.kind == "floats":
+        return _check_array(key, raw, source, loc)
     if key.kind == "str":
         if not isinstance(raw, str):
             raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
@@ -408,6 +488,27 @@ def _check_value(key: Key, raw: Any, source: str) -> Any:
     if bad:
         raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
     return val
+
+
+def _check_array(key: Key, raw: Any, source: str, loc: str) -> tuple[float, ...]:
+    if isinstance(raw, (str, bytes)) or not isinstance(raw, (list, tuple)):
+        raise InputError(f"expected {key.expected()}, got {raw!r} ({type(raw).__name__})",
+                         source=source, location=loc)
+    if not key.min_items <= len(raw) <= key.max_items:
+        raise InputError(f"expected {key.expected()}, got {len(raw)} entries",
+                         source=source, location=loc)
+    out = []
+    for i, item in enumerate(raw):
+        if isinstance(item, bool) or not isinstance(item, (int, float)):
+            raise InputError(f"expected {key.expected()}, got {item!r} "
+                             f"({type(item).__name__}) at index {i}", source=source,
+                             location=loc)
+        val = float(item)
+        if not math.isfinite(val):
+            raise InputError(f"expected {key.expected()}, got {item!r} at index {i}",
+                             source=source, location=loc)
+        out.append(val)
+    return tuple(out)
 
 
 def _check_effects(values: Mapping[str, Any], source: str) -> None:
@@ -445,6 +546,7 @@ def _check_consistency(values: Mapping[str, Any], source: str) -> None:
     if "friction.static" in values and values["friction.static"] < values["friction.coulomb"]:
         raise InputError("expected static >= coulomb (break-away friction is not lower "
                          "than sliding friction)", source=source, location="[friction] static")
+    _check_valve_law(values, source)
     ctrl = [k for k in values if k.startswith("controller.")]
     if ctrl:
         for need in ("controller.kind", "controller.sample_time", "controller.kp"):
@@ -455,6 +557,36 @@ def _check_consistency(values: Mapping[str, Any], source: str) -> None:
             raise InputError(f"expected one of {', '.join(repr(k) for k in CONTROLLER_KINDS)}, "
                              f"got {values['controller.kind']!r}", source=source,
                              location="[controller] kind")
+
+
+def _check_valve_law(values: Mapping[str, Any], source: str) -> None:
+    """``[valve] law`` is known; the input-affine law has all its coefficients, the
+    ISO law none of them (a stray coefficient would be silently ignored otherwise)."""
+    law = values.get("valve.law", "iso6358")
+    if law not in VALVE_LAWS:
+        hint = difflib.get_close_matches(law, VALVE_LAWS, 1)
+        raise InputError(f"expected one of {', '.join(repr(v) for v in VALVE_LAWS)}, got {law!r}"
+                         + (f" (did you mean {hint[0]!r}?)" if hint else ""),
+                         source=source, location="[valve] law")
+    names = ", ".join(k.name for k in AFFINE_KEYS)
+    if law == "input_affine":
+        for key in AFFINE_KEYS:
+            if key.path not in values:
+                raise InputError(
+                    f"missing; law = 'input_affine' needs all of {names}; expected "
+                    f"{key.expected()}: {key.doc}", source=source, location=_fmt_path(key.path))
+        if not any(values["valve.affine_gamma"]):
+            raise InputError("expected at least one nonzero coefficient: with Gamma = 0 "
+                             "the command would not move the valve", source=source,
+                             location="[valve] affine_gamma")
+    else:
+        for key in AFFINE_KEYS:
+            if key.path in values:
+                raise InputError(
+                    f"applies only with law = 'input_affine', but this valve's law is "
+                    f"{law!r}{'' if 'valve.law' in values else ' (the default)'}; "
+                    f"set [valve] law = \"input_affine\" or remove {names}",
+                    source=source, location=_fmt_path(key.path))
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:

@@ -10,6 +10,11 @@ with the states, input, outputs and **all physical parameters** (the vector ``p`
 names in :attr:`Plant.param_names`, nominal values in :attr:`Plant.p0`) symbolic,
 so the same model serves simulation, linearisation, estimation and MPC.
 
+The valve follows the law the plant file selects with ``[valve] law``: four ISO 6358
+edges (default) or paper 003's input-affine law, whose polynomial coefficients are
+then entries of ``p`` too (``valve.affine_psi_in[0]``, ...), so a grey-box fit can
+adjust them (see :mod:`workbench.params` for the keys).
+
 Examples
 --------
 >>> from workbench import Plant
@@ -77,7 +82,12 @@ class Plant:
         State derivative and outputs, both ``(x, u, p)``.
     states, inputs, outputs : tuple of Signal
     param_names : tuple of str
-        Dotted plant-file keys of the entries of ``p``.
+        Dotted plant-file keys of the entries of ``p``; array keys contribute one
+        entry per coefficient, named ``"<key>[i]"`` (e.g. ``"valve.affine_phi[0]"``).
+        Keys of the valve law not selected (:attr:`valve_law`) are left out: they do
+        not enter the dynamics.
+    valve_law : str
+        ``"iso6358"`` or ``"input_affine"``.
     p0 : numpy.ndarray
         Nominal parameter values (SI).
     """
@@ -88,9 +98,18 @@ class Plant:
         self.params = params
         self.friction = friction
         self.name = params.name
-        self.param_names: tuple[str, ...] = tuple(
-            k.path for k in SCHEMA
-            if k.physical and (k.path in params.values or k.default is not None))
+        self.valve_law: str = params["valve.law"]
+        names: list[str] = []
+        for k in SCHEMA:
+            if not k.physical or k.law not in (None, self.valve_law):
+                continue
+            if k.path not in params.values and k.default is None:
+                continue
+            if k.kind == "floats":
+                names += [f"{k.path}[{j}]" for j in range(len(params[k.path]))]
+            else:
+                names.append(k.path)
+        self.param_names: tuple[str, ...] = tuple(names)
         self.p0 = np.array([float(params[n]) for n in self.param_names])
         self.segments = 0
         if params.has_effect("line_dynamics"):
@@ -258,9 +277,20 @@ class Plant:
         opening = valve.effective_opening(s, deadband)
         port_a, port_b = (la_p[0], lb_p[0]) if n else (p_a, p_b)
         port_ta, port_tb = (T, T) if n else (t_a, t_b)
-        q_va, q_vb, q_sup = valve.four_edge_flows(
-            opening, p_s, port_a, port_b, p_atm, pv["valve.sonic_conductance"],
-            pv["valve.critical_pressure_ratio"], T, port_ta, port_tb, underlap)
+        if self.valve_law == "input_affine":
+            # Paper 003's approximation II at both ports (port b mirrored); it does
+            # not see the supply pressure or the gas temperatures, and its supply
+            # draw is the inflow part max(q_a, 0) + max(q_b, 0).
+            coeffs = {name: [pv[f"valve.{name}[{j}]"] for j in range(len(prm[f"valve.{name}"]))]
+                      for name in ("affine_phi", "affine_psi_in", "affine_psi_out",
+                                   "affine_gamma")}
+            q_va, q_vb, q_sup = valve.affine_port_flows(
+                opening, port_a, port_b, coeffs["affine_phi"], coeffs["affine_psi_in"],
+                coeffs["affine_psi_out"], coeffs["affine_gamma"], underlap=underlap)
+        else:
+            q_va, q_vb, q_sup = valve.four_edge_flows(
+                opening, p_s, port_a, port_b, p_atm, pv["valve.sonic_conductance"],
+                pv["valve.critical_pressure_ratio"], T, port_ta, port_tb, underlap)
 
         if n:
             length, diam = pv["lines.length"], pv["lines.diameter"]
@@ -333,6 +363,14 @@ class Plant:
 
         Used only to pin the equilibrium pressures of a closed-centre valve,
         which the ideal valve leaves undetermined.
+
+        Under the input-affine law the same leak is added as
+        ``underlap * Gamma(1) * (psi_in(p) - psi_out(p))`` at each port (the inflow of a
+        fully open inlet minus the outflow of a fully open exhaust, scaled), which
+        pins a closed centre (phi = 0) at the pressure where the fitted inlet and
+        exhaust gains agree, as the four-edge leak does. Where phi is a real leakage
+        it dominates this term and :func:`workbench.linearize.operating_point`'s
+        refinement on the real ``f`` moves to phi's balance.
         """
         xdot, _ = self._build(self.x_sym, self.u_sym, self.p_sym, self.friction, underlap)
         return ca.Function("f_reg", [self.x_sym, self.u_sym, self.p_sym], [xdot],
@@ -340,7 +378,11 @@ class Plant:
 
     # ---------------------------------------------------------------- helpers
     def pvec(self, **changes: float) -> np.ndarray:
-        """Nominal parameter vector with some entries replaced by dotted name."""
+        """Nominal parameter vector with some entries replaced by dotted name.
+
+        ``load__mass=2.0`` or ``**{"valve.affine_psi_in[2]": 0.06}`` (indexed names of
+        array keys cannot be keyword arguments, pass them through a dict).
+        """
         p = self.p0.copy()
         for name, val in changes.items():
             p[self.param_index(name.replace("__", "."))] = val
@@ -396,8 +438,17 @@ class Plant:
                 chamber.chamber_mass(st["p_b"], v_b, st.get("T_b", T)))
 
     def full_opening_flow(self) -> float:
-        """Mass flow (kg/s) through one fully open edge from supply to atmosphere."""
+        """Mass flow (kg/s) through one fully open edge from supply to atmosphere.
+
+        Under the input-affine law: the flow into a port held at atmospheric
+        pressure with the valve fully open, phi(p_atm) + psi_in(p_atm) Gamma(1).
+        """
         prm = self.params
+        if self.valve_law == "input_affine":
+            return float(valve.affine_flow(
+                prm["gas.atmospheric_pressure"], valve.gamma_odd(1.0, prm["valve.affine_gamma"]),
+                prm["valve.affine_phi"], prm["valve.affine_psi_in"],
+                prm["valve.affine_psi_out"]))
         return float(gas.iso6358_flow(prm["valve.sonic_conductance"],
                                       prm["valve.critical_pressure_ratio"],
                                       prm["supply.pressure"], prm["gas.atmospheric_pressure"],
@@ -418,6 +469,7 @@ class Plant:
             "volume_b_max_m3": prm["cylinder.dead_volume_b"] + self.area_b * self.stroke,
             "max_force_extend_N": (p_s - p_atm) * self.area_a,
             "max_force_retract_N": (p_s - p_atm) * self.area_b,
+            "valve_law": self.valve_law,
             "valve_flow_full_opening_kg_s": q_full,
             "valve_flow_full_opening_l_min_anr": units.kg_s_to_l_min_anr(q_full),
             "effects": list(self.effects),
@@ -428,4 +480,5 @@ class Plant:
 
     def __repr__(self) -> str:
         eff = ", ".join(self.effects) or "no effects"
-        return f"Plant({self.name!r}, {len(self.states)} states, {eff})"
+        law = "" if self.valve_law == "iso6358" else f", valve law {self.valve_law}"
+        return f"Plant({self.name!r}, {len(self.states)} states, {eff}{law})"

@@ -2,11 +2,25 @@
 
 Spool opening ``s`` in [-1, 1]: positive connects supply -> A and B -> exhaust.
 Flows are mass flows in kg/s, positive *into* the named port's chamber.
+
+Two laws give the port flows of the same 5/3 valve:
+
+* :func:`four_edge_flows` -- four ISO 6358 metering edges (the plant default,
+  ``[valve] law = "iso6358"``);
+* :func:`affine_port_flows` -- paper 003's approximation II,
+  q_m = phi(p) + psi(p, sgn Gamma) Gamma, applied to port A with Gamma(s) and to
+  port B with Gamma(-s) = -Gamma(s) (``[valve] law = "input_affine"``). Its
+  coefficients can be fitted to a four-edge valve by linear least squares with
+  :func:`fit_affine_to_four_edge`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, Sequence
+
 import casadi as ca
+import numpy as np
 
 from .gas import T_REF, iso6358_flow, is_symbolic, where
 
@@ -19,6 +33,9 @@ __all__ = [
     "polyval",
     "gamma_odd",
     "affine_flow",
+    "affine_port_flows",
+    "AffineValveFit",
+    "fit_affine_to_four_edge",
 ]
 
 
@@ -133,3 +150,216 @@ def affine_flow(p, gamma, phi, psi_in, psi_out, pressure_scale=1e5):
     pn = p / pressure_scale
     psi = where(gamma >= 0, polyval(psi_in, pn), polyval(psi_out, pn))
     return polyval(phi, pn) + psi * gamma
+
+
+def affine_port_flows(opening, p_a, p_b, phi, psi_in, psi_out, gamma,
+                      pressure_scale=1e5, underlap=0.0):
+    """Flows of a 5/3 valve whose two ports follow the input-affine law.
+
+    Port A sees Gamma(opening), port B the mirrored Gamma(-opening) = -Gamma(opening):
+    a positive opening fills A and exhausts B, as in :func:`four_edge_flows`. The
+    same coefficients serve both ports (a symmetric valve).
+
+    Parameters
+    ----------
+    opening : signed effective opening (see :func:`effective_opening`), -.
+    p_a, p_b : port pressures, Pa.
+    phi, psi_in, psi_out : ascending coefficients in ``p / pressure_scale``; phi in
+        kg/s, psi in kg/s per unit Gamma (see :func:`affine_flow`).
+    gamma : coefficients g_k of :func:`gamma_odd` (Gamma is dimensionless, a
+        function of the normalised opening).
+    pressure_scale : Pa per unit of the polynomial variable (1e5: bar).
+    underlap : every edge leaks this fraction of its full opening (as in
+        :func:`edge_openings`): adds underlap * Gamma(1) * (psi_in(p) - psi_out(p))
+        to each port, the inflow of a fully open inlet minus the outflow of a fully
+        open exhaust. Only used to pin the equilibrium pressures when phi does not
+        (see :mod:`workbench.linearize`), never in simulation.
+
+    Returns
+    -------
+    q_a, q_b : mass flows into ports A and B, kg/s.
+    q_supply : mass flow drawn from the supply, kg/s: max(q_a, 0) + max(q_b, 0).
+        A port can only gain mass from the supply (the exhaust is at atmosphere),
+        so this is the supply draw the law implies; it equals the four-edge valve's
+        supply flow for a closed-centre valve whose exhausting chamber is above
+        atmosphere. Internal supply -> exhaust leakage the law does not see is not
+        counted.
+
+    The law does not depend on the gas temperatures (paper 003 characterises the
+    valve at one temperature).
+    """
+    g_a = gamma_odd(opening, gamma)
+    g_b = gamma_odd(-opening, gamma)
+    q_a = affine_flow(p_a, g_a, phi, psi_in, psi_out, pressure_scale)
+    q_b = affine_flow(p_b, g_b, phi, psi_in, psi_out, pressure_scale)
+    if is_symbolic(underlap) or underlap != 0.0:
+        g_full = gamma_odd(1.0, gamma)
+        for_p = [p_a / pressure_scale, p_b / pressure_scale]
+        leak = [underlap * g_full * (polyval(psi_in, pn) - polyval(psi_out, pn)) for pn in for_p]
+        q_a, q_b = q_a + leak[0], q_b + leak[1]
+    q_supply = ca.fmax(q_a, 0.0) + ca.fmax(q_b, 0.0)
+    return q_a, q_b, q_supply
+
+
+# ---------------------------------------------------------------------- fitting (approx. II)
+@dataclass(frozen=True)
+class AffineValveFit:
+    """Coefficients of the input-affine law fitted to a valve, and the fit's quality.
+
+    Attributes
+    ----------
+    phi, psi_in, psi_out : ascending coefficients in p / pressure_scale, kg/s
+        (psi: kg/s per unit Gamma).
+    gamma : coefficients of :func:`gamma_odd` in the normalised opening, -.
+    pressure_scale : Pa per unit of the polynomial variable.
+    rms, max_error : RMS and largest |q_affine - q_reference| over the grid, kg/s.
+    pressure_range : (low, high) pressures of the grid, Pa.
+    points : number of (p, opening) grid points.
+    """
+
+    phi: tuple[float, ...]
+    psi_in: tuple[float, ...]
+    psi_out: tuple[float, ...]
+    gamma: tuple[float, ...]
+    pressure_scale: float
+    rms: float
+    max_error: float
+    pressure_range: tuple[float, float]
+    points: int
+
+    def flow(self, p, opening):
+        """Port flow (kg/s) of the fitted law at pressure ``p`` (Pa) and ``opening`` (-)."""
+        g = gamma_odd(opening, self.gamma)
+        return affine_flow(p, g, self.phi, self.psi_in, self.psi_out, self.pressure_scale)
+
+    def plant_values(self) -> dict[str, Any]:
+        """Dotted plant-file keys selecting this law, for ``PlantParams.replace``."""
+        return {"valve.law": "input_affine", "valve.affine_phi": list(self.phi),
+                "valve.affine_psi_in": list(self.psi_in),
+                "valve.affine_psi_out": list(self.psi_out),
+                "valve.affine_gamma": list(self.gamma)}
+
+    def toml_lines(self) -> str:
+        """The ``[valve]`` lines of a plant file (full precision, round-trips exactly)."""
+        def arr(v):
+            return "[" + ", ".join(repr(float(c)) for c in v) + "]"
+        return "\n".join([
+            'law = "input_affine"',
+            f"affine_phi = {arr(self.phi)}",
+            f"affine_psi_in = {arr(self.psi_in)}",
+            f"affine_psi_out = {arr(self.psi_out)}",
+            f"affine_gamma = {arr(self.gamma)}",
+        ])
+
+
+def fit_affine_to_four_edge(conductance: float, b: float, p_s: float, p_atm: float,
+                            temperature: float = T_REF, *, psi_degree: int = 5,
+                            phi_degree: int | None = None,
+                            gamma: Sequence[float] = (1.0, 0.0), pin_ends: bool = True,
+                            n_pressure: int = 60, n_opening: int = 41,
+                            pressure_scale: float = 1e5) -> AffineValveFit:
+    """Fit the input-affine law to a four-edge ISO 6358 valve (paper 003, approximation II).
+
+    Reference data: the port-A flow of :func:`four_edge_flows` (no underlap) on a
+    grid of ``n_pressure`` port pressures in [p_atm, p_s] and ``n_opening`` openings
+    in [-1, 1]. With Gamma held fixed, q = phi(p) + psi(p, sgn Gamma) Gamma is linear
+    in the coefficients of phi, psi_in and psi_out, so they follow from one linear
+    least-squares solve. The four-edge law is exactly linear in the opening (an
+    edge's area is proportional to it), so the default Gamma(s) = s is exact and
+    only the pressure dependence is approximated.
+
+    Parameters
+    ----------
+    conductance : sonic conductance of one fully open edge, m^3/(s Pa).
+    b : critical pressure ratio, -.
+    p_s, p_atm : supply and exhaust pressures, Pa (absolute).
+    temperature : gas temperature, K.
+    psi_degree : degree of psi_in and psi_out in p / pressure_scale.
+    phi_degree : degree of phi, or None for phi = 0: a closed-centre four-edge
+        valve passes no flow at the centre, so its phi is zero and fitting it would
+        only absorb the error of psi (and make the centre equilibrium wander).
+    gamma : coefficients g_k of :func:`gamma_odd`, held fixed (default s, written
+        in paper 003's degree-2 form g1 s + g2 s|s| with g2 = 0 so that a later
+        grey-box fit can free g2).
+    pin_ends : constrain psi_in(p_s) = 0 and psi_out(p_atm) = 0, as the valve does:
+        a chamber at supply pressure takes no more air, one at atmosphere gives no
+        more. Unconstrained, a fully open valve would drive the chamber slightly past
+        p_s or below p_atm (about 8 kPa for the 25 mm rig's valve); pinned, the RMS
+        error grows a little (0.29 -> 0.42 g/s for that valve).
+    n_pressure, n_opening : grid size.
+    pressure_scale : Pa per unit of the polynomial variable.
+
+    Returns
+    -------
+    AffineValveFit
+
+    Examples
+    --------
+    >>> fit = fit_affine_to_four_edge(6.25e-8, 0.23, 6.0e5, 101325.0)
+    >>> fit.rms < 0.5e-3            # kg/s, paper 003's bound for approximation II
+    True
+    """
+    if psi_degree < 1 or (phi_degree is not None and phi_degree < 0):
+        raise ValueError("psi_degree must be >= 1 and phi_degree >= 0 (or None)")
+    if not p_s > p_atm > 0:
+        raise ValueError(f"need p_s > p_atm > 0, got p_s = {p_s!r} Pa, p_atm = {p_atm!r} Pa")
+    gamma = tuple(float(g) for g in gamma)
+    pressures = np.linspace(p_atm, p_s, n_pressure)
+    openings = np.linspace(-1.0, 1.0, n_opening)
+    pp, oo = (a.ravel() for a in np.meshgrid(pressures, openings, indexing="ij"))
+    q_ref = np.array([float(four_edge_flows(o, p_s, p, p, p_atm, conductance, b,
+                                            temperature, temperature, temperature)[0])
+                      for p, o in zip(pp, oo)])
+    pn = pp / pressure_scale
+    g = np.array([float(gamma_odd(float(o), gamma)) for o in oo])
+    inlet = (g >= 0).astype(float)
+    n_psi = psi_degree + 1
+
+    # Basis of each polynomial (ascending powers of pn). With pin_ends, psi_in is
+    # (pn_s - pn) r(pn) and psi_out (pn - pn_atm) r(pn), r of degree psi_degree - 1;
+    # the free coefficients are those of r, mapped back to monomials afterwards.
+    pn_s, pn_atm = p_s / pressure_scale, p_atm / pressure_scale
+    if pin_ends:
+        k = psi_degree
+        root_in, root_out = pn_s, pn_atm
+    else:
+        k = n_psi
+    powers = np.vander(pn, k, increasing=True)
+    if pin_ends:
+        b_in = (root_in - pn)[:, None] * powers
+        b_out = (pn - root_out)[:, None] * powers
+    else:
+        b_in = b_out = powers
+    blocks = [b_in * (g * inlet)[:, None], b_out * (g * (1.0 - inlet))[:, None]]
+    if phi_degree is not None:
+        blocks.insert(0, np.vander(pn, phi_degree + 1, increasing=True))
+    A = np.hstack(blocks)
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0.0] = 1.0
+    sol, *_ = np.linalg.lstsq(A / scale, q_ref, rcond=None)
+    sol = sol / scale
+    i = 0
+    if phi_degree is not None:
+        phi = tuple(float(c) for c in sol[:phi_degree + 1])
+        i = phi_degree + 1
+    else:
+        phi = (0.0,)
+    r_in, r_out = sol[i:i + k], sol[i + k:i + 2 * k]
+    P = np.polynomial.polynomial
+    if pin_ends:
+        psi_in = P.polymul([root_in, -1.0], r_in)
+        psi_out = P.polymul([-root_out, 1.0], r_out)
+    else:
+        psi_in, psi_out = r_in, r_out
+    psi_in = tuple(float(c) for c in np.pad(psi_in, (0, n_psi - len(psi_in))))
+    psi_out = tuple(float(c) for c in np.pad(psi_out, (0, n_psi - len(psi_out))))
+    fit = AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
+                         pressure_scale=float(pressure_scale), rms=0.0, max_error=0.0,
+                         pressure_range=(float(p_atm), float(p_s)), points=int(len(q_ref)))
+    q_fit = np.array([float(fit.flow(p, o)) for p, o in zip(pp, oo)])
+    err = q_fit - q_ref
+    return AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
+                          pressure_scale=float(pressure_scale),
+                          rms=float(np.sqrt(np.mean(err ** 2))),
+                          max_error=float(np.max(np.abs(err))),
+                          pressure_range=(float(p_atm), float(p_s)), points=int(len(q_ref)))
