@@ -11,7 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["replay_figure", "trajectory_figure", "save_figure"]
+__all__ = ["replay_figure", "trajectory_figure", "save_figure", "validation_figure",
+           "compare_figure"]
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> None:
@@ -77,3 +78,122 @@ def replay_figure(rec, sim, fits: Mapping[str, float], path: str | os.PathLike,
             ax.set_title(f"fit {fits[n]:.1f} %", fontsize=9, loc="right")
         ax.legend(loc="best", fontsize=8)
     save_figure(fig, path)
+
+
+# ---------------------------------------------------------------------- validation
+def _validation_title(v) -> str:
+    verdict = "PASSED" if v.passed else "FAILED: " + ", ".join(c.name for c in v.failed)
+    return f"{v.label} -- {verdict}" if v.label else verdict
+
+
+def _validation_axes(title: str):
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9.0, 8.0), constrained_layout=True)
+    fig.suptitle(title, fontsize=11)
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    ax_x, ax_u, ax_p = axes
+    ax_x.set_ylabel("position [mm]")
+    ax_u.set_ylabel("command u [V]")
+    ax_p.set_ylabel("chamber pressure [bar abs]")
+    ax_p.set_xlabel("time t [s]")
+    return fig, axes
+
+
+def _limit_lines(v, ax_u, ax_p, with_labels: bool = True) -> None:
+    u_min, u_max = v.command_range
+    p_atm, p_sup = v.pressure_range
+    ax_u.axhline(u_min, color="0.4", ls="--", lw=0.9,
+                 label=f"saturation {u_min:g} / {u_max:g} V" if with_labels else None)
+    ax_u.axhline(u_max, color="0.4", ls="--", lw=0.9)
+    ax_p.axhline(p_sup / 1e5, color="0.2", ls="-.", lw=0.9,
+                 label=f"supply {p_sup / 1e5:.2f} bar" if with_labels else None)
+    ax_p.axhline(p_atm / 1e5, color="0.5", ls=":", lw=1.2,
+                 label=f"atmosphere {p_atm / 1e5:.2f} bar" if with_labels else None)
+
+
+def _stop_marker(v, axes) -> None:
+    if v.error is None:
+        return
+    t_stop = v.metrics.simulated_time
+    for ax in axes:
+        ax.axvline(t_stop, color="tab:red", lw=1.2, alpha=0.8)
+    axes[0].annotate("simulation stopped", (t_stop, 1.0), xycoords=("data", "axes fraction"),
+                     xytext=(3, -12), textcoords="offset points", color="tab:red", fontsize=8)
+
+
+def validation_figure(validation, band: bool = True, title: str | None = None):
+    """Figure of one validation (:class:`workbench.validate.Validation`).
+
+    Three panels sharing time (s): reference and position (mm) with the settling
+    band of each step shaded (``band``); command u (V) with the valve's saturation
+    limits dashed; chamber pressures p_a, p_b (bar abs) with supply and atmosphere.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Save it with :func:`save_figure`.
+    """
+    v = validation
+    run = v.trajectory
+    fig, (ax_x, ax_u, ax_p) = _validation_axes(_validation_title(v) if title is None else title)
+    t_ref = np.linspace(0.0, v.reference.duration, 2000)
+    t_ref = np.union1d(t_ref, v.reference.times)
+    ax_x.plot(t_ref, v.reference(t_ref) * 1e3, "k--", lw=1.0, label="reference r")
+    ax_x.plot(run.time, run["x"] * 1e3, color="tab:blue", lw=1.3, label="position x")
+    if band:
+        first = True
+        for m in v.segments:
+            if m.segment.kind != "step" or not np.isfinite(m.band):
+                continue
+            s = m.segment
+            ax_x.fill_between([s.start, s.end], (s.r_end - m.band) * 1e3, (s.r_end + m.band) * 1e3,
+                              color="tab:green", alpha=0.25, lw=0,
+                              label="settling band" if first else None)
+            first = False
+    ax_u.step(run.time, run["u"], where="post", color="tab:purple", lw=1.0, label="command u")
+    _limit_lines(v, ax_u, ax_p)
+    ax_p.plot(run.time, run["p_a"] / 1e5, color="tab:orange", lw=1.1, label="p_a")
+    ax_p.plot(run.time, run["p_b"] / 1e5, color="tab:green", lw=1.1, label="p_b")
+    _stop_marker(v, (ax_x, ax_u, ax_p))
+    ax_x.set_xlim(0.0, v.reference.duration)
+    ax_x.legend(loc="best", fontsize=8, ncol=2, framealpha=0.85)
+    for ax in (ax_u, ax_p):
+        ax.legend(loc="upper right", fontsize=8, ncol=2, framealpha=0.85)
+    return fig
+
+
+def compare_figure(validations: Sequence, labels: Sequence[str], title: str = ""):
+    """Several validations (e.g. P vs PD) on the same three panels as :func:`validation_figure`.
+
+    The reference and the limits are drawn from the first validation; each run gets
+    one colour (p_a solid, p_b dashed).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if len(validations) != len(labels) or not validations:
+        raise ValueError(f"give one label per validation: {len(validations)} validations, "
+                         f"{len(labels)} labels")
+    fig, (ax_x, ax_u, ax_p) = _validation_axes(title)
+    v0 = validations[0]
+    t_ref = np.union1d(np.linspace(0.0, v0.reference.duration, 2000), v0.reference.times)
+    ax_x.plot(t_ref, v0.reference(t_ref) * 1e3, "k--", lw=1.0, label="reference r")
+    _limit_lines(v0, ax_u, ax_p)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (v, lab) in enumerate(zip(validations, labels)):
+        c = colors[i % len(colors)]
+        run = v.trajectory
+        verdict = "pass" if v.passed else "FAIL"
+        ax_x.plot(run.time, run["x"] * 1e3, color=c, lw=1.2, label=f"x {lab} ({verdict})")
+        ax_u.step(run.time, run["u"], where="post", color=c, lw=0.9, label=f"u {lab}")
+        ax_p.plot(run.time, run["p_a"] / 1e5, color=c, lw=1.0, label=f"p_a {lab}")
+        ax_p.plot(run.time, run["p_b"] / 1e5, color=c, lw=1.0, ls="--", label=f"p_b {lab}")
+        if v.error is not None:
+            for ax in (ax_x, ax_u, ax_p):
+                ax.axvline(v.metrics.simulated_time, color=c, lw=1.0, alpha=0.7)
+    ax_x.set_xlim(0.0, max(v.reference.duration for v in validations))
+    ax_x.legend(loc="best", fontsize=8, ncol=2, framealpha=0.85)
+    for ax in (ax_u, ax_p):
+        ax.legend(loc="upper right", fontsize=8, ncol=2, framealpha=0.85)
+    return fig

@@ -66,8 +66,8 @@ CONTROLLER_AXES = {"kp": "V/m", "kd": "V s/m", "ki": "V/(m s)", "k0": "1/s",
 #: model converges quadratically from the scaled nominal guess (residual < 1e-12
 #: after 5-6 steps for the reference plants); the real-model steps are ~0 unless
 #: the plant leaks.
-_PINNED_ITERATIONS = 8
-_REAL_ITERATIONS = 3
+_PINNED_ITERATIONS = 6
+_REAL_ITERATIONS = 2
 #: Points whose scaled equilibrium residual exceeds this are re-solved one by one
 #: with the robust :func:`workbench.linearize.operating_point`.
 _RESIDUAL_TOL = 1e-8

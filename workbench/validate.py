@@ -1,0 +1,880 @@
+"""Auto-validation of a position controller on the full nonlinear plant.
+
+A controller is run in the sampled-data closed loop (:func:`workbench.simulate.closed_loop`)
+on the plant exactly as its plant file describes it (every effect included) over a
+validation profile -- steps both ways, large and small, ramps up and down, holds long
+enough to settle -- and the response is judged against a :class:`Specification`.
+
+The profile is cut into segments from the :class:`~workbench.simulate.Reference`
+itself (never from the response): *steps* (a jump of the reference, then a hold),
+*ramps* (the reference moves linearly) and *holds* (constant reference not entered
+by a jump). Each segment gets its metrics; each check judges the worst segment.
+
+Examples
+--------
+>>> from workbench import Plant, controllers, validate                      # doctest: +SKIP
+>>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")            # doctest: +SKIP
+>>> v = validate.validate(plant, controllers.from_plant(plant))             # doctest: +SKIP
+>>> v.passed, [c.name for c in v.failed]                                   # doctest: +SKIP
+(False, ['overshoot'])
+>>> for row in v.table(): print(row)                                        # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from . import simulate
+from .errors import InputError, WorkbenchError
+from .simulate import Reference, Trajectory
+
+__all__ = [
+    "Specification", "Segment", "SegmentMetrics", "Check", "Metrics", "Validation",
+    "validation_profile", "find_segments", "segment_metrics", "evaluate", "validate",
+]
+
+#: Two reference values closer than this (m) are the same level.
+_LEVEL_TOL = 1e-12
+
+
+# ---------------------------------------------------------------------- specification
+def _meta(unit: str, doc: str) -> dict:
+    return {"unit": unit, "doc": doc}
+
+
+@dataclass(frozen=True)
+class Specification:
+    """What a position loop must achieve on the validation profile (SI units).
+
+    The defaults are those of a pneumatic positioning axis without integral action
+    (a P or PD loop on a proportional valve, 10 ms sampling) as in paper 000: a few
+    tenths of a second of time constant, millimetre accuracy. Any ``max_*`` limit may
+    be ``inf`` to report a quantity without judging it.
+
+    Parameters
+    ----------
+    max_overshoot : float, %
+        Largest overshoot of a step, in percent of the step size. Default 10 %: a
+        positioning axis may pass its target a little, but not by a tenth of the way.
+        An overshoot not larger than ``band_floor`` is always accepted, so a 5 mm step
+        is not failed for a 0.6 mm excursion.
+    max_settling_time : float, s
+        Time after a step at which the position has entered the settling band for
+        good. Default 1.5 s: about ten closed-loop time constants of the paper-000 P
+        loop (K0 = 7 1/s, 1/K0 = 0.14 s), long enough for the slower nonlinear
+        response of large steps, short enough to catch a creeping or ringing loop.
+    settling_band : float, -
+        Half-width of the settling band as a fraction of the step size. Default 0.02
+        (the usual 2 % band).
+    band_floor : float, m
+        Smallest half-width of the settling band (and the overshoot that is always
+        accepted). Default 1 mm: the resolution a rig engineer measures a pneumatic
+        axis to; without it a 10 mm step would need to settle within 0.2 mm.
+    max_steady_state_error : float, m
+        Mean |r - x| over the last ``steady_state_window`` of each hold. Default
+        1 mm, equal to the band floor: a step that settled into its band passes.
+    steady_state_window : float, s
+        Length of the end of each hold over which the steady-state error is averaged
+        (at most half the hold). Default 0.5 s.
+    max_saturation : float, -
+        Largest fraction of the run time during which the command sits at the valve's
+        ``command_min`` or ``command_max``. Default 0.10: brief saturation on large
+        steps is normal; a loop that spends more than a tenth of the time at a limit
+        is limit-cycling or badly tuned.
+    max_ramp_error : float, m
+        Largest |r - x| during a ramp. Default 20 mm: at the profile's default ramp
+        speed (0.2 stroke/s, 0.1 m/s on a 0.5 m stroke) this asks for a velocity-error
+        constant of at least 5 1/s, which the paper-000 P loop (K0 = 7 1/s, following
+        error v/K0 = 14 mm) meets and a sluggish loop does not.
+    pressure_tolerance : float, Pa
+        Chamber pressures must stay within [atmosphere - tolerance, supply +
+        tolerance]. Default 0.2 bar (2e4 Pa): a chamber compressed by a braking piston
+        may exceed the supply a little, and one expanding may dip below atmosphere a
+        little; more means violent motion or a solver out of its depth.
+    """
+
+    max_overshoot: float = field(default=10.0, metadata=_meta("%", "largest step overshoot"))
+    max_settling_time: float = field(default=1.5, metadata=_meta("s", "largest settling time"))
+    settling_band: float = field(default=0.02, metadata=_meta("-", "band, fraction of step"))
+    band_floor: float = field(default=1e-3, metadata=_meta("m", "smallest band half-width"))
+    max_steady_state_error: float = field(default=1e-3, metadata=_meta("m", "mean |r - x| at hold end"))
+    steady_state_window: float = field(default=0.5, metadata=_meta("s", "end of hold averaged"))
+    max_saturation: float = field(default=0.10, metadata=_meta("-", "fraction of time saturated"))
+    max_ramp_error: float = field(default=0.02, metadata=_meta("m", "largest |r - x| on ramps"))
+    pressure_tolerance: float = field(default=2e4, metadata=_meta("Pa", "pressure bound margin"))
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            val = getattr(self, f.name)
+            unit = f.metadata.get("unit", "")
+            if isinstance(val, bool) or not isinstance(val, (int, float, np.integer, np.floating)):
+                raise InputError(f"specification {f.name} must be a number ({unit}), got {val!r}")
+            val = float(val)
+            object.__setattr__(self, f.name, val)
+            if math.isnan(val):
+                raise InputError(f"specification {f.name} is NaN; give a number in {unit}")
+            can_be_inf = f.name.startswith("max_")
+            if math.isinf(val) and not (can_be_inf and val > 0):
+                raise InputError(f"specification {f.name} must be finite ({unit}), got {val!r}"
+                                 + (" (only max_* limits may be +inf)" if not can_be_inf else ""))
+            if val < 0:
+                raise InputError(f"specification {f.name} must not be negative, got {val:g} {unit}")
+        if not 0.0 < self.settling_band < 1.0:
+            raise InputError("specification settling_band is a fraction of the step size and "
+                             f"must lie in (0, 1), got {self.settling_band:g} (2 % is 0.02)")
+        if self.max_settling_time <= 0:
+            raise InputError("specification max_settling_time must be > 0 s")
+        if self.steady_state_window <= 0:
+            raise InputError("specification steady_state_window must be > 0 s")
+        if self.max_saturation > 1.0:
+            raise InputError("specification max_saturation is a fraction of the run time in "
+                             f"[0, 1], got {self.max_saturation:g} (10 % is 0.10)")
+        if self.max_overshoot > 1000.0 and not math.isinf(self.max_overshoot):
+            raise InputError(f"specification max_overshoot is in percent of the step; "
+                             f"{self.max_overshoot:g} % is not a meaningful limit")
+
+    def band(self, step_size: float) -> float:
+        """Half-width (m) of the settling band for a step of ``step_size`` m."""
+        return max(self.settling_band * abs(step_size), self.band_floor)
+
+    def as_dict(self) -> dict[str, float]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+# ---------------------------------------------------------------------- profile
+def validation_profile(plant, large_step: float | None = None, small_step: float | None = None,
+                       hold: float = 2.5, ramp_speed: float | None = None,
+                       margin: float = 0.1, start_hold: float = 0.5) -> Reference:
+    """The standard validation reference for a plant (piecewise linear, m).
+
+    Starting at rest at mid-stroke ``c = L/2`` (``L`` the stroke):
+
+    1. hold ``start_hold`` at ``c``;
+    2. large step up to ``c + a``, hold; large step down (size ``2 a``) to ``c - a``, hold;
+    3. small step up to ``c - a + s``, hold; small step down to ``c - a``, hold;
+    4. ramp up at ``ramp_speed`` to ``(1 - margin) L``, hold;
+       ramp down to ``margin L``, hold.
+
+    Every level stays within [margin L, (1 - margin) L]. With the defaults on a
+    0.5 m stroke: steps of 125, 250 and 10 mm, ramps at 0.1 m/s, 22.75 s in all.
+
+    Parameters
+    ----------
+    plant : Plant or float
+        The plant (its stroke is used) or the stroke itself, m.
+    large_step : float, m
+        ``a``; default a quarter of the stroke.
+    small_step : float, m
+        ``s``; default 2 % of the stroke (10 mm on 0.5 m).
+    hold : float, s
+        Hold after every step and ramp. Default 2.5 s (settling time limit 1.5 s plus
+        the steady-state window 0.5 s, with room to spare).
+    ramp_speed : float, m/s
+        Default 0.2 stroke per second.
+    margin : float, -
+        Fraction of the stroke kept free at each end. Default 0.1.
+    start_hold : float, s
+        Initial hold at mid-stroke. Default 0.5 s.
+
+    Returns
+    -------
+    Reference
+        A :func:`workbench.simulate.profile`.
+    """
+    L = float(plant.stroke) if hasattr(plant, "stroke") else float(plant)
+    if not (math.isfinite(L) and L > 0):
+        raise InputError(f"stroke must be a positive length in m, got {L!r}")
+    if not 0.0 <= margin < 0.5:
+        raise InputError(f"margin is a fraction of the stroke in [0, 0.5), got {margin!r}")
+    lo, hi, c = margin * L, (1.0 - margin) * L, 0.5 * L
+    a = 0.25 * L if large_step is None else float(large_step)
+    s = 0.02 * L if small_step is None else float(small_step)
+    v = 0.2 * L if ramp_speed is None else float(ramp_speed)
+    room = c - lo
+    if not 0.0 < a <= room + 1e-12:
+        raise InputError(f"large_step must be in (0, {room:g}] m so that mid-stroke +- the step "
+                         f"stays within {margin:.0%}..{1 - margin:.0%} of the {L:g} m stroke; "
+                         f"got {a!r} m")
+    if not 0.0 < s <= 2.0 * a:
+        raise InputError(f"small_step must be in (0, {2 * a:g}] m, got {s!r} m")
+    if not (math.isfinite(hold) and hold > 0):
+        raise InputError(f"hold must be > 0 s, got {hold!r}")
+    if not (math.isfinite(start_hold) and start_hold >= 0):
+        raise InputError(f"start_hold must be >= 0 s, got {start_hold!r}")
+    if not (math.isfinite(v) and v > 0):
+        raise InputError(f"ramp_speed must be > 0 m/s, got {v!r}")
+
+    pts: list[tuple[float, float]] = [(0.0, c)]
+    t = start_hold
+    if start_hold > 0:
+        pts.append((t, c))
+    for level in (c + a, c - a, c - a + s, c - a):
+        pts.append((t, level))
+        t += hold
+        pts.append((t, level))
+    for target in (hi, lo):
+        t += abs(target - pts[-1][1]) / v
+        pts.append((t, target))
+        t += hold
+        pts.append((t, target))
+    return simulate.profile(pts)
+
+
+# ---------------------------------------------------------------------- segments
+@dataclass(frozen=True)
+class Segment:
+    """A piece of the reference.
+
+    Attributes
+    ----------
+    kind : {"step", "ramp", "hold"}
+        ``step``: the reference jumps at ``start`` from ``r_start`` to ``r_end`` and is
+        held until ``end``; ``ramp``: it moves linearly from ``r_start`` to ``r_end``;
+        ``hold``: it stays at ``r_start == r_end`` (not entered by a jump).
+    start, end : s.
+    r_start, r_end : m.
+    """
+
+    kind: str
+    start: float
+    end: float
+    r_start: float
+    r_end: float
+
+    @property
+    def size(self) -> float:
+        """Change of the reference over the segment, m."""
+        return self.r_end - self.r_start
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+    def describe(self) -> str:
+        """E.g. ``step at 0.50 s, 250.0 -> 375.0 mm``."""
+        if self.kind == "hold":
+            return f"hold {self.start:.2f}-{self.end:.2f} s at {self.r_end * 1e3:.1f} mm"
+        what = "step at" if self.kind == "step" else "ramp"
+        when = f"{self.start:.2f} s" if self.kind == "step" else f"{self.start:.2f}-{self.end:.2f} s"
+        return f"{what} {when}, {self.r_start * 1e3:.1f} -> {self.r_end * 1e3:.1f} mm"
+
+
+def find_segments(reference: Reference) -> tuple[Segment, ...]:
+    """Steps, ramps and holds of a reference, from its break points alone.
+
+    A jump straight into a ramp is not a step (it has no hold to settle in); the
+    ramp's tracking error covers it. Consecutive constant pieces at one level merge.
+
+    Parameters
+    ----------
+    reference : Reference
+        From :func:`workbench.simulate.steps` or :func:`workbench.simulate.profile`.
+    """
+    if not isinstance(reference, Reference):
+        raise InputError("validation needs a workbench.simulate.Reference (from simulate.steps "
+                         f"or simulate.profile) to find its steps and ramps, got {type(reference).__name__}")
+    t = np.asarray(reference.times, dtype=float)
+    r = np.asarray(reference.values, dtype=float)
+    if t.ndim != 1 or t.shape != r.shape or len(t) < 2:
+        raise InputError("a reference needs at least two (time, value) points")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(r))):
+        raise InputError("the reference has non-finite times or values")
+    if np.any(np.diff(t) < 0):
+        raise InputError("reference times must not decrease")
+    segs: list[Segment] = []
+
+    def constant(t0: float, t1: float, level: float, jump_from: float | None) -> None:
+        if jump_from is not None and abs(level - jump_from) > _LEVEL_TOL:
+            segs.append(Segment("step", t0, t1, jump_from, level))
+            return
+        last = segs[-1] if segs else None
+        if (last is not None and last.kind != "ramp" and abs(last.end - t0) <= 1e-12
+                and abs(last.r_end - level) <= _LEVEL_TOL):
+            segs[-1] = replace(last, end=t1)
+        else:
+            segs.append(Segment("hold", t0, t1, level, level))
+
+    if t[0] > 0:
+        constant(0.0, float(t[0]), float(r[0]), None)
+    if reference.hold:
+        prev = None
+        for i in range(len(t) - 1):
+            if t[i + 1] <= t[i]:
+                continue
+            constant(float(t[i]), float(t[i + 1]), float(r[i]), prev)
+            prev = float(r[i])
+        return tuple(segs)
+
+    jump_from: float | None = None
+    for i in range(len(t) - 1):
+        dt, dr = t[i + 1] - t[i], r[i + 1] - r[i]
+        if dt <= 0:
+            if abs(dr) > _LEVEL_TOL and jump_from is None:
+                jump_from = float(r[i])
+            continue
+        if abs(dr) <= _LEVEL_TOL:
+            constant(float(t[i]), float(t[i + 1]), float(r[i]), jump_from)
+        else:
+            segs.append(Segment("ramp", float(t[i]), float(t[i + 1]), float(r[i]), float(r[i + 1])))
+        jump_from = None
+    return tuple(segs)
+
+
+# ---------------------------------------------------------------------- metrics
+@dataclass(frozen=True)
+class SegmentMetrics:
+    """How the position followed one segment.
+
+    Attributes
+    ----------
+    segment : Segment
+    overshoot : %, of the step size (steps; NaN otherwise).
+    overshoot_abs : m, the same as a length.
+    settling_time : s after the step until |x - r| stays within ``band``; ``inf`` if it
+        is outside the band at any time in the steady-state window at the end of the
+        hold (it must have settled before the steady-state error is measured).
+    rise_time : s from 10 % to 90 % of the step; ``inf`` if 90 % is never reached.
+    band : m, settling band half-width used.
+    steady_state_error : m, mean |r - x| over the end of the hold (steps, holds).
+    tracking_error : m, max |r - x| over the segment.
+    iae : m s, integral of |r - x| over the segment.
+    complete : the trajectory covers the whole segment.
+    """
+
+    segment: Segment
+    overshoot: float = math.nan
+    overshoot_abs: float = math.nan
+    settling_time: float = math.nan
+    rise_time: float = math.nan
+    band: float = math.nan
+    steady_state_error: float = math.nan
+    tracking_error: float = math.nan
+    iae: float = math.nan
+    complete: bool = True
+
+    def as_dict(self) -> dict[str, Any]:
+        s = self.segment
+        return {"kind": s.kind, "start": s.start, "end": s.end, "r_start": s.r_start,
+                "r_end": s.r_end, "overshoot": self.overshoot, "overshoot_abs": self.overshoot_abs,
+                "settling_time": self.settling_time, "rise_time": self.rise_time,
+                "band": self.band, "steady_state_error": self.steady_state_error,
+                "tracking_error": self.tracking_error, "iae": self.iae, "complete": self.complete}
+
+
+def _trapz(y: np.ndarray, t: np.ndarray) -> float:
+    if len(t) < 2:
+        return 0.0
+    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
+
+
+def _first_crossing(t: np.ndarray, y: np.ndarray, level: float) -> float:
+    """First time (linear interpolation) at which ``y`` reaches ``level`` from below."""
+    above = np.flatnonzero(y >= level)
+    if len(above) == 0:
+        return math.inf
+    k = int(above[0])
+    if k == 0:
+        return float(t[0])
+    y0, y1 = y[k - 1], y[k]
+    return float(t[k - 1] + (level - y0) / (y1 - y0) * (t[k] - t[k - 1]))
+
+
+def _settling(t: np.ndarray, err: np.ndarray, band: float, t_step: float,
+              dwell: float = 0.0) -> float:
+    """Time after ``t_step`` from which |err| <= band to the end (interpolated).
+
+    ``inf`` if the response is outside the band during the last ``dwell`` seconds
+    (a ringing response that happens to be inside at the last sample has not settled).
+    """
+    out = np.flatnonzero(np.abs(err) > band)
+    if len(out) == 0:
+        return 0.0
+    k = int(out[-1])
+    if k == len(t) - 1 or t[k] >= t[-1] - dwell:
+        return math.inf
+    a, b = abs(err[k]), abs(err[k + 1])
+    frac = (a - band) / (a - b) if a != b else 1.0
+    return float(t[k] + frac * (t[k + 1] - t[k]) - t_step)
+
+
+def segment_metrics(time: np.ndarray, x: np.ndarray, reference: Reference,
+                    segments: Sequence[Segment], spec: Specification) -> tuple[SegmentMetrics, ...]:
+    """Metrics of every segment from a sampled position.
+
+    Parameters
+    ----------
+    time : (N,) s, increasing. x : (N,) position, m.
+    reference : Reference, m (evaluated at ``time``; the step levels come from the segments).
+    segments : from :func:`find_segments`. spec : Specification (band, window).
+    """
+    time = np.asarray(time, dtype=float)
+    x = np.asarray(x, dtype=float)
+    t_last = float(time[-1]) if len(time) else -math.inf
+    out = []
+    for seg in segments:
+        sel = (time >= seg.start - 1e-9) & (time <= seg.end + 1e-9)
+        tt, xx = time[sel], x[sel]
+        complete = t_last >= seg.end - 1e-9
+        if len(tt) < 2 or seg.duration <= 0:
+            out.append(SegmentMetrics(seg, complete=complete and len(tt) >= 2))
+            continue
+        if seg.kind == "ramp":
+            rr = np.asarray(reference(tt), dtype=float)
+        else:
+            rr = np.full_like(tt, seg.r_end)
+        e = np.abs(rr - xx)
+        kw: dict[str, Any] = {"tracking_error": float(np.max(e)), "iae": _trapz(e, tt),
+                              "complete": complete}
+        w = min(spec.steady_state_window, 0.5 * seg.duration)
+        if seg.kind in ("step", "hold"):
+            if complete:
+                win = tt >= seg.end - w - 1e-9
+            else:
+                win = tt >= tt[-1] - w - 1e-9
+            ew, tw = e[win], tt[win]
+            kw["steady_state_error"] = (_trapz(ew, tw) / (tw[-1] - tw[0])
+                                        if len(tw) > 1 and tw[-1] > tw[0] else float(np.mean(ew)))
+        if seg.kind == "step":
+            size = seg.size
+            sgn = math.copysign(1.0, size)
+            band = spec.band(size)
+            peak = float(np.max(sgn * (xx - seg.r_end)))
+            over = max(peak, 0.0)
+            progress = sgn * (xx - seg.r_start) / abs(size)
+            t10 = _first_crossing(tt, progress, 0.1)
+            t90 = _first_crossing(tt, progress, 0.9)
+            kw.update(overshoot=100.0 * over / abs(size), overshoot_abs=over, band=band,
+                      settling_time=_settling(tt, xx - seg.r_end, band, seg.start, w),
+                      rise_time=(t90 - t10) if math.isfinite(t90) else math.inf)
+        out.append(SegmentMetrics(seg, **kw))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------- checks and results
+@dataclass(frozen=True)
+class Check:
+    """One judged quantity.
+
+    Attributes
+    ----------
+    name : str. value : measured (worst case), in ``unit``. limit : in ``unit``.
+    unit : SI unit or ``%``. passed : bool.
+    detail : where the worst case is, or why the check failed, in words.
+    bound : ``"max"`` (value must not exceed limit) or ``"min"`` (must not fall below).
+    """
+
+    name: str
+    value: float
+    limit: float
+    unit: str
+    passed: bool
+    detail: str = ""
+    bound: str = "max"
+
+    def __post_init__(self) -> None:
+        if self.bound not in ("max", "min"):
+            raise InputError(f"a check's bound is 'max' or 'min', got {self.bound!r}")
+        object.__setattr__(self, "value", float(self.value))
+        object.__setattr__(self, "limit", float(self.limit))
+        object.__setattr__(self, "passed", bool(self.passed))
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Whole-run figures (SI).
+
+    Attributes
+    ----------
+    iae : m s, integral of |r - x|. saturation_fraction : -, of the run time.
+    p_min, p_max : Pa, lowest and highest chamber pressure.
+    ramp_error_max : m (NaN without ramps). simulated_time : s reached.
+    duration : s, the reference's duration.
+    """
+
+    iae: float
+    saturation_fraction: float
+    p_min: float
+    p_max: float
+    ramp_error_max: float
+    simulated_time: float
+    duration: float
+
+
+_DISPLAY = {"m": (1e3, "mm"), "Pa": (1e-5, "bar abs"), "s": (1.0, "s"), "%": (1.0, "%")}
+
+
+def _fmt(v: float) -> str:
+    if math.isnan(v):
+        return "n/a"
+    if math.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    return f"{v:.5g}" if abs(v) < 1e5 else f"{v:.4e}"
+
+
+@dataclass(frozen=True, eq=False)
+class Validation:
+    """Result of :func:`validate` (or :func:`evaluate`).
+
+    Attributes
+    ----------
+    trajectory : Trajectory (up to where the simulation got).
+    reference : Reference. spec : Specification.
+    segments : tuple of SegmentMetrics, in time order.
+    checks : tuple of Check.
+    metrics : Metrics.
+    command_range : (command_min, command_max), V.
+    pressure_range : (atmospheric, supply) pressure, Pa.
+    error : str or None, why the simulation stopped early.
+    wall_time : s spent simulating (0 for :func:`evaluate`).
+    label : what was validated (plant and controller), for titles.
+    """
+
+    trajectory: Trajectory
+    reference: Reference
+    spec: Specification
+    segments: tuple[SegmentMetrics, ...]
+    checks: tuple[Check, ...]
+    metrics: Metrics
+    command_range: tuple[float, float]
+    pressure_range: tuple[float, float]
+    error: str | None = None
+    wall_time: float = 0.0
+    label: str = ""
+
+    @property
+    def passed(self) -> bool:
+        """All checks passed."""
+        return all(c.passed for c in self.checks)
+
+    @property
+    def failed(self) -> tuple[Check, ...]:
+        """The checks that failed."""
+        return tuple(c for c in self.checks if not c.passed)
+
+    def check(self, name: str) -> Check:
+        """A check by name."""
+        for c in self.checks:
+            if c.name == name:
+                return c
+        raise KeyError(f"no check '{name}'; checks: {', '.join(c.name for c in self.checks)}")
+
+    def table(self) -> list[tuple[str, str, str, str, str]]:
+        """Rows ``(item, value, limit, unit, "pass"/"FAIL")`` for a report.
+
+        Lengths are shown in mm and pressures in bar (absolute); the limit carries
+        its direction (``<=`` or ``>=``).
+        """
+        rows = []
+        for c in self.checks:
+            k, unit = _DISPLAY.get(c.unit, (1.0, c.unit))
+            op = "<=" if c.bound == "max" else ">="
+            rows.append((c.name, _fmt(c.value * k), f"{op} {_fmt(c.limit * k)}", unit,
+                         "pass" if c.passed else "FAIL"))
+        return rows
+
+    def summary(self) -> str:
+        """A few lines of plain text: verdict, then one line per check."""
+        head = f"{self.label + ': ' if self.label else ''}{'PASSED' if self.passed else 'FAILED'}"
+        lines = [head]
+        for (item, val, lim, unit, verdict), c in zip(self.table(), self.checks):
+            lines.append(f"  {verdict:4s} {item:22s} {val:>10s} {lim:>12s} {unit:8s} {c.detail}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for JSON (SI)."""
+        return {"label": self.label, "passed": self.passed, "error": self.error,
+                "wall_time": self.wall_time, "spec": self.spec.as_dict(),
+                "checks": [{"name": c.name, "value": c.value, "limit": c.limit, "unit": c.unit,
+                            "bound": c.bound, "passed": c.passed, "detail": c.detail}
+                           for c in self.checks],
+                "metrics": {f.name: getattr(self.metrics, f.name) for f in fields(self.metrics)},
+                "segments": [s.as_dict() for s in self.segments]}
+
+
+def _worst(items, key: Callable) -> Any:
+    best, best_k = None, -math.inf
+    for it in items:
+        k = key(it)
+        if math.isnan(k):
+            continue
+        if best is None or k > best_k:
+            best, best_k = it, k
+    return best
+
+
+def _plant_limits(plant) -> tuple[tuple[float, float], tuple[float, float]]:
+    prm = plant.params
+    try:
+        return ((float(prm["valve.command_min"]), float(prm["valve.command_max"])),
+                (float(prm["gas.atmospheric_pressure"]), float(prm["supply.pressure"])))
+    except KeyError as exc:
+        raise InputError(f"the plant lacks {exc} needed to judge a validation") from None
+
+
+def _signal(traj: Trajectory, name: str) -> np.ndarray:
+    try:
+        return np.asarray(traj[name], dtype=float)
+    except KeyError:
+        raise InputError(f"the trajectory has no signal '{name}', needed for validation") from None
+
+
+def evaluate(trajectory: Trajectory, reference: Reference, spec: Specification, plant,
+             error: str | None = None, wall_time: float = 0.0, label: str = "") -> Validation:
+    """Judge an existing trajectory against a specification (no simulation).
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        Needs ``x`` (m), ``u`` (V), ``p_a`` and ``p_b`` (Pa); time in s. It may stop
+        before the reference ends (a failed simulation): the run then fails the
+        ``simulation`` check, and the segments it reached are judged on what there is.
+    reference : Reference, m.
+    spec : Specification.
+    plant : Plant
+        Gives the command range (``valve.command_min/max``, V) and the pressure bounds
+        (``gas.atmospheric_pressure``, ``supply.pressure``, Pa).
+    error : str, optional
+        Why the simulation stopped early, for the ``simulation`` check's detail.
+
+    Returns
+    -------
+    Validation
+    """
+    if not isinstance(spec, Specification):
+        raise InputError(f"spec must be a validate.Specification, got {type(spec).__name__}")
+    segments = find_segments(reference)
+    t = np.asarray(trajectory.time, dtype=float)
+    if t.ndim != 1 or len(t) < 1:
+        raise InputError("the trajectory has no samples")
+    x, u = _signal(trajectory, "x"), _signal(trajectory, "u")
+    p_a, p_b = _signal(trajectory, "p_a"), _signal(trajectory, "p_b")
+    (u_min, u_max), (p_atm, p_sup) = _plant_limits(plant)
+    seg_m = segment_metrics(t, x, reference, segments, spec)
+    duration = reference.duration
+    t_end = float(t[-1])
+    completed = error is None and t_end >= duration - 1e-6
+
+    # whole run
+    r_all = np.asarray(reference(t), dtype=float)
+    iae = _trapz(np.abs(r_all - x), t)
+    tol_u = 1e-9 * max(1.0, u_max - u_min)
+    sat = (u <= u_min + tol_u) | (u >= u_max - tol_u)
+    if len(t) > 1:
+        dt = np.diff(t)
+        sat_frac = float(np.sum(dt * sat[:-1]) / (t[-1] - t[0]))   # u is held (ZOH) on [t_k, t_k+1)
+    else:
+        sat_frac = float(sat[0])
+    p_all = np.concatenate((p_a, p_b))
+    p_min, p_max = float(np.min(p_all)), float(np.max(p_all))
+    ramps = [m for m in seg_m if m.segment.kind == "ramp"]
+    ramp_max = max((m.tracking_error for m in ramps if not math.isnan(m.tracking_error)),
+                   default=math.nan)
+    metrics = Metrics(iae=iae, saturation_fraction=sat_frac, p_min=p_min, p_max=p_max,
+                      ramp_error_max=ramp_max, simulated_time=t_end, duration=duration)
+
+    checks: list[Check] = []
+    if completed:
+        checks.append(Check("simulation", duration, duration, "s", True,
+                            f"ran the whole {duration:g} s profile"))
+    else:
+        why = error or "the trajectory ends before the reference"
+        checks.append(Check("simulation", t_end, duration, "s", False,
+                             f"stopped at t = {t_end:.3f} s of {duration:g} s: {why}"))
+
+    steps = [m for m in seg_m if m.segment.kind == "step" and not math.isnan(m.overshoot)]
+    if steps:
+        def over_ratio(m: SegmentMetrics) -> float:
+            lim = _overshoot_limit(spec, m)
+            return m.overshoot / lim if lim > 0 else (math.inf if m.overshoot > 0 else 0.0)
+        w = _worst(steps, over_ratio)
+        lim = _overshoot_limit(spec, w)
+        checks.append(Check("overshoot", w.overshoot, lim, "%", w.overshoot <= lim,
+                            f"{w.segment.describe()}: {w.overshoot_abs * 1e3:.2f} mm"
+                            + (f" (limit raised from {spec.max_overshoot:g} % to the "
+                               f"{spec.band_floor * 1e3:g} mm floor)" if lim > spec.max_overshoot else "")))
+        w = _worst(steps, lambda m: m.settling_time)
+        unsettled = "; never settled within the hold" if math.isinf(w.settling_time) else ""
+        checks.append(Check("settling time", w.settling_time, spec.max_settling_time, "s",
+                            w.settling_time <= spec.max_settling_time,
+                            f"{w.segment.describe()}, band +-{w.band * 1e3:.2f} mm{unsettled}"
+                            + ("" if w.complete else " (hold cut short)")))
+    holds = [m for m in seg_m if m.segment.kind in ("step", "hold")
+             and not math.isnan(m.steady_state_error)]
+    if holds:
+        w = _worst(holds, lambda m: m.steady_state_error)
+        checks.append(Check("steady-state error", w.steady_state_error, spec.max_steady_state_error,
+                            "m", w.steady_state_error <= spec.max_steady_state_error,
+                            f"{w.segment.describe()}, mean over the last "
+                            f"{min(spec.steady_state_window, 0.5 * w.segment.duration):g} s"))
+    if ramps and not math.isnan(ramp_max):
+        w = _worst(ramps, lambda m: m.tracking_error)
+        checks.append(Check("ramp tracking error", w.tracking_error, spec.max_ramp_error, "m",
+                            w.tracking_error <= spec.max_ramp_error,
+                            f"{w.segment.describe()} "
+                            f"({abs(w.segment.size) / w.segment.duration * 1e3:.0f} mm/s)"))
+    checks.append(Check("command saturation", 100.0 * sat_frac, 100.0 * spec.max_saturation, "%",
+                        sat_frac <= spec.max_saturation,
+                        f"time at {u_min:g} V or {u_max:g} V: {sat_frac * (t[-1] - t[0]):.2f} s"))
+    lo, hi = p_atm - spec.pressure_tolerance, p_sup + spec.pressure_tolerance
+    k_lo = int(np.argmin(p_all)) % len(t)
+    k_hi = int(np.argmax(p_all)) % len(t)
+    ch_lo = "p_a" if p_a[k_lo] <= p_b[k_lo] else "p_b"
+    ch_hi = "p_a" if p_a[k_hi] >= p_b[k_hi] else "p_b"
+    checks.append(Check("min chamber pressure", p_min, lo, "Pa", p_min >= lo,
+                        f"{ch_lo} at t = {t[k_lo]:.2f} s; atmosphere {p_atm / 1e5:.3f} bar "
+                        f"- {spec.pressure_tolerance / 1e5:g} bar", bound="min"))
+    checks.append(Check("max chamber pressure", p_max, hi, "Pa", p_max <= hi,
+                        f"{ch_hi} at t = {t[k_hi]:.2f} s; supply {p_sup / 1e5:.3f} bar "
+                        f"+ {spec.pressure_tolerance / 1e5:g} bar"))
+    return Validation(trajectory=trajectory, reference=reference, spec=spec, segments=seg_m,
+                      checks=tuple(checks), metrics=metrics, command_range=(u_min, u_max),
+                      pressure_range=(p_atm, p_sup), error=None if completed else (error or
+                      "trajectory ends before the reference"), wall_time=wall_time, label=label)
+
+
+def _overshoot_limit(spec: Specification, m: SegmentMetrics) -> float:
+    """Overshoot limit (%) of one step: the spec's, or the band floor if that is larger."""
+    size = abs(m.segment.size)
+    return max(spec.max_overshoot, 100.0 * spec.band_floor / size) if size > 0 else math.inf
+
+
+# ---------------------------------------------------------------------- validate
+class _Counting:
+    """Controller proxy counting the samples the simulator asked for."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+        self.sample_time = inner.sample_time
+        self.calls = 0
+
+    def reset(self):
+        self.calls = 0
+        return self.inner.reset()
+
+    def update(self, state, r, y):
+        self.calls += 1
+        return self.inner.update(state, r, y)
+
+
+def _truncate(traj: Trajectory, n: int) -> Trajectory:
+    return replace(traj, time=traj.time[:n], states=traj.states[:n], inputs=traj.inputs[:n],
+                   outputs=traj.outputs[:n],
+                   reference=None if traj.reference is None else traj.reference[:n])
+
+
+def _describe(plant, controller) -> str:
+    kind = getattr(controller, "kind", type(controller).__name__)
+    gains = ", ".join(f"{k} = {getattr(controller, k):g}" for k in ("kp", "kd", "ki")
+                      if getattr(controller, k, 0))
+    return f"{getattr(plant, 'name', 'plant')}: {kind.upper() if len(kind) <= 3 else kind}" \
+           + (f" ({gains})" if gains else "")
+
+
+def validate(plant, controller=None, spec: Specification | None = None,
+             reference: Reference | None = None, x0: Sequence[float] | float | None = None,
+             progress: bool | None = None, output_step: float | None = 1e-3,
+             label: str | None = None) -> Validation:
+    """Run ``controller`` on the full nonlinear ``plant`` and judge the response.
+
+    The plant is simulated with every effect its plant file has (sampled-data loop,
+    command clipped to the valve range, ADC/DAC quantisation from the plant file).
+    If the simulation fails (the solver gives up on a runaway loop) or produces
+    non-finite values, the part simulated until then is kept and judged, and the
+    ``simulation`` check fails with the solver's message: no exception escapes for
+    that. Input errors (bad arguments, start outside the stroke) still raise.
+
+    Parameters
+    ----------
+    plant : Plant
+    controller : DiscreteController, optional
+        Default: the plant file's ``[controller]`` (:func:`workbench.controllers.from_plant`).
+    spec : Specification, optional
+        Default ``Specification()``.
+    reference : Reference, optional
+        Default :func:`validation_profile` of the plant.
+    x0 : float (m) or full state, optional
+        Default: at rest at r(0).
+    progress : bool, optional
+        Progress bar (None: automatic).
+    output_step : float, s, optional
+        Sampling of the reported trajectory (default 1 ms, finer than the 10 ms
+        control period so overshoot peaks are not missed), rounded so that a whole
+        number of outputs fits in one control period; None: every control sample.
+    label : str, optional
+        Title for figures and reports (default plant name and controller gains).
+
+    Returns
+    -------
+    Validation
+
+    Examples
+    --------
+    >>> v = validate(plant, controllers.from_plant(plant))   # doctest: +SKIP
+    >>> print(v.summary())                                    # doctest: +SKIP
+    """
+    if controller is None:
+        from .controllers import from_plant
+        controller = from_plant(plant)
+    spec = Specification() if spec is None else spec
+    if not isinstance(spec, Specification):
+        raise InputError(f"spec must be a validate.Specification, got {type(spec).__name__}")
+    reference = validation_profile(plant) if reference is None else reference
+    find_segments(reference)                      # reject a bad reference before simulating
+    T = getattr(controller, "sample_time", None)
+    if not (isinstance(T, (int, float)) and T > 0):
+        raise InputError("the controller needs a sample_time > 0 s")
+    duration = reference.duration
+    if output_step is not None and not (output_step > 0):
+        raise InputError(f"output_step must be > 0 s, got {output_step!r}")
+    label = _describe(plant, controller) if label is None else label
+
+    # Outputs on a grid that divides the control period, simulated to a whole number
+    # of periods: closed_loop then integrates one period at a time (its fast path).
+    per = 1 if output_step is None else max(1, int(round(T / output_step)))
+
+    def run(t_end: float, proxy: _Counting) -> Trajectory:
+        n = int(math.ceil(t_end / T - 1e-9))
+        out_t = (T / per) * np.arange(n * per + 1)
+        return simulate.closed_loop(plant, proxy, reference, t_end=n * T, x0=x0,
+                                    output_times=out_t, progress=progress)
+
+    error = None
+    t0 = _time.perf_counter()
+    proxy = _Counting(controller)
+    try:
+        traj = run(duration, proxy)
+    except InputError:
+        raise
+    except WorkbenchError as exc:
+        # The solver gave up on the interval after the last sample the controller
+        # saw; everything before it was integrated. The loop is deterministic, so
+        # rerunning to that sample reproduces it with every state kept.
+        error = f"the simulation failed: {exc}"
+        t_ok = max(proxy.calls - 1, 0) * T
+        try:
+            traj = run(t_ok, _Counting(controller))
+        except InputError:
+            raise
+        except WorkbenchError:
+            try:
+                traj = run(0.0, _Counting(controller))
+            except WorkbenchError as exc0:
+                raise WorkbenchError(f"the simulation cannot even start: {exc0}") from None
+    wall = _time.perf_counter() - t0
+    beyond = np.flatnonzero(traj.time > duration + 1e-9)
+    if len(beyond):                              # the last period ran past the reference's end
+        traj = _truncate(traj, int(beyond[0]))
+
+    sig = np.column_stack([traj["x"], traj["u"], traj["p_a"], traj["p_b"]])
+    bad = np.flatnonzero(~np.all(np.isfinite(sig), axis=1))
+    if len(bad):
+        k = int(bad[0])
+        if error is None:
+            error = f"the simulation produced non-finite values at t = {traj.time[k]:.3f} s"
+        traj = _truncate(traj, max(k, 1))
+    return evaluate(traj, reference, spec, plant, error=error, wall_time=wall, label=label)
