@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["replay_figure", "trajectory_figure", "save_figure", "validation_figure",
-           "compare_figure"]
+           "compare_figure", "stability_map_figure"]
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> None:
@@ -196,4 +196,68 @@ def compare_figure(validations: Sequence, labels: Sequence[str], title: str = ""
     ax_x.legend(loc="best", fontsize=8, ncol=2, framealpha=0.85)
     for ax in (ax_u, ax_p):
         ax.legend(loc="upper right", fontsize=8, ncol=2, framealpha=0.85)
+    return fig
+
+
+_AXIS_LABELS = {"load.mass": "moving mass M", "supply.pressure": "supply pressure p_s",
+                "k0": "loop gain K0", "kp": "controller gain kp", "kd": "derivative gain kd",
+                "ki": "integral gain ki", "lines.length": "line length",
+                "load.viscous_friction": "viscous friction k_f"}
+
+
+def _axis_scale(axis) -> tuple[float, str]:
+    """Display factor and label for a map axis (bar for pressures, mm for positions)."""
+    name = _AXIS_LABELS.get(axis.name, axis.name)
+    if axis.unit == "Pa":
+        return 1e-5, f"{name} [bar abs]"
+    if axis.name == "position":
+        return 1e3, "piston position x [mm]"
+    if axis.name == "sample_time":
+        return 1e3, "sample time T [ms]"
+    return 1.0, f"{name} [{axis.unit}]" if axis.unit else name
+
+
+def stability_map_figure(smap, title: str | None = None):
+    """Colour map of |z|max with the exact (|z| = 1), PCT and continuous boundaries."""
+    from matplotlib.colors import TwoSlopeNorm
+    from matplotlib.lines import Line2D
+    fx, lx = _axis_scale(smap.x)
+    fy, ly = _axis_scale(smap.y)
+    fig, ax = plt.subplots(figsize=(7.5, 5.2), constrained_layout=True)
+    rho = np.ma.masked_invalid(smap.rho)
+    lo = float(np.nanmin(smap.rho)) if np.any(np.isfinite(smap.rho)) else 0.5
+    hi = float(np.nanmax(smap.rho)) if np.any(np.isfinite(smap.rho)) else 1.5
+    lo, hi = min(lo, 0.999), max(hi, 1.001)
+    norm = TwoSlopeNorm(vmin=lo, vcenter=1.0, vmax=hi)
+    X, Y = smap.x.values * fx, smap.y.values * fy
+    mesh = ax.pcolormesh(X, Y, rho, cmap="RdYlGn_r", norm=norm, shading="nearest")
+    cb = fig.colorbar(mesh, ax=ax)
+    cb.set_label("largest closed-loop pole magnitude |z|max [-]")
+    handles = []
+    if np.nanmin(smap.rho) < 1 < np.nanmax(smap.rho):
+        ax.contour(X, Y, smap.rho, levels=[1.0], colors="k", linewidths=2.0)
+        handles.append(Line2D([], [], color="k", lw=2.0, label="exact sampled-data limit |z| = 1"))
+    b = smap.boundary
+    if b is not None:
+        bx, by = b["x"] * fx, b["y"] * fy
+        for key, style, label in (("pct_ratio", "--", "PCT limit K0 = 2 zeta / Ts"),
+                                  ("continuous_ratio", ":", "continuous limit K0 = 2 zeta w0")):
+            r = b[key]
+            if np.all(np.isfinite(r)) and r.min() < 1 < r.max() and min(r.shape) >= 2:
+                ax.contour(bx, by, r, levels=[1.0], colors="#1f3a93", linestyles=style,
+                           linewidths=1.6)
+                handles.append(Line2D([], [], color="#1f3a93", ls=style, lw=1.6, label=label))
+    ax.set_xlabel(lx)
+    ax.set_ylabel(ly)
+    ctrl = smap.controller
+    desc = f"kp = {ctrl['kp']:g} V/m" if smap.x.name not in ("kp", "k0") and smap.y.name not in ("kp", "k0") else ""
+    if ctrl.get("kd"):
+        desc += f", kd = {ctrl['kd']:g} V s/m"
+    T = "" if "sample_time" in (smap.x.name, smap.y.name) else f"T = {ctrl['sample_time'] * 1e3:g} ms"
+    extra = ", ".join(s for s in (desc.strip(", "), T,
+                                  f"{smap.delay_samples} sample delay" if smap.delay_samples else "")
+                      if s)
+    ax.set_title(title or f"Stability map{': ' + extra if extra else ''}", fontsize=11)
+    if handles:
+        ax.legend(handles=handles, loc="best", fontsize=8, framealpha=0.85)
     return fig
