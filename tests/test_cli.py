@@ -92,3 +92,14 @@ def test_python_dash_m_entry_point():
     res = subprocess.run([sys.executable, "-m", "workbench", "--version"], capture_output=True,
                          text=True, check=False)
     assert res.returncode == 0 and "workbench" in res.stdout
+
+
+def test_limits_help_is_complete(capsys):
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["limits", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "usage:" in out and "SI" in out
+    for opt in ("--x", "--w0", "--zeta", "--sample-time", "--k0", "--kp", "--kv", "--json",
+                "null"):
+        assert opt in out

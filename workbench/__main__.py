@@ -1,6 +1,6 @@
 """Command line: ``python -m workbench`` / ``workbench``.
 
-Sub-commands: ``check``, ``simulate``, ``linearize``, ``bench``. Every error a user
+Sub-commands: ``check``, ``simulate``, ``linearize``, ``limits``, ``bench``. Every error a user
 can cause (a bad file, a bad argument) is reported in one readable line, exit 2.
 """
 
@@ -92,6 +92,102 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
         print("note: " + n)
     np.set_printoptions(precision=4, linewidth=120)
     print("A =\n", lin.A, "\nB =\n", lin.B.ravel())
+    return 0
+
+
+def _json_safe(value):
+    """inf / nan -> None (JSON has no such tokens), recursively."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def _cmd_limits(args: argparse.Namespace) -> int:
+    from .errors import InputError
+    from . import stability
+    model_opts = [o for o, v in (("--w0", args.w0), ("--zeta", args.zeta), ("--kv", args.kv))
+                  if v is not None]
+    notes: list[str] = []
+    if args.k0 is not None and args.kp is not None:
+        raise InputError("give the loop gain --k0 (1/s) or the controller gain --kp (V/m), "
+                         "not both")
+    if args.plant is not None:
+        if model_opts:
+            raise InputError(f"{', '.join(model_opts)} cannot be combined with PLANT.toml: "
+                             "with a plant file Kv, w0 and zeta come from its linearisation "
+                             "at --x")
+        if args.x is None:
+            raise InputError("with PLANT.toml the position --x (m) is needed")
+        from .plant import Plant
+        plant = Plant.from_toml(args.plant)
+        lim = stability.limits_from_plant(plant, args.x, sample_time=args.sample_time,
+                                          kp=args.kp, k0=args.k0)
+        where = f"{args.plant} at x = {args.x:g} m"
+        kind = plant.params.get("controller.kind") if plant.params.has_controller else None
+        if kind not in (None, "p"):
+            notes.append(f"the plant file's controller is {kind}; these limits are for a P "
+                         "controller with its kp")
+    else:
+        if args.x is not None:
+            raise InputError("--x needs PLANT.toml; for a model give --w0, --zeta and "
+                             "--sample-time instead")
+        missing = [o for o, v in (("--w0", args.w0), ("--zeta", args.zeta),
+                                  ("--sample-time", args.sample_time)) if v is None]
+        if missing:
+            raise InputError("give PLANT.toml with --x, or the model --w0, --zeta and "
+                             f"--sample-time (missing: {', '.join(missing)})")
+        k0 = args.k0
+        if args.kp is not None:
+            if args.kv is None:
+                raise InputError("--kp (V/m) needs --kv (m/(V s)) to form K0 = kp Kv; "
+                                 "or give --k0 directly")
+            k0 = args.kp * args.kv
+        lim = stability.gain_limits(args.w0, args.zeta, args.sample_time, k0=k0, kv=args.kv)
+        where = "model"
+    if args.json:
+        out = lim.as_dict()
+        if args.plant is not None:
+            out = {**out, "plant": str(args.plant), "x": args.x, "notes": notes}
+        print(json.dumps(_json_safe(out), indent=2))
+        return 0
+
+    def num(v, fmt=".4g"):
+        return "-" if v is None else ("inf" if not np.isfinite(v) else format(v, fmt))
+
+    print(f"gain limits of the sampled P position loop ({where})")
+    kv_txt = f"Kv = {lim.kv:.4g} m/(V s), " if lim.kv is not None else ""
+    print(f"  model: {kv_txt}w0 = {lim.w0:.4g} rad/s, zeta = {lim.zeta:.4g}, "
+          f"T = {lim.sample_time * 1e3:.4g} ms, Ts = T/2 + 1/w0 = "
+          f"{lim.pct_time_constant * 1e3:.4g} ms")
+    if lim.k0 is None:
+        print("  loop gain K0: not given (no margins)")
+    else:
+        kp_txt = f"  (kp = {lim.kp:.4g} V/m)" if lim.kp is not None else ""
+        print(f"  loop gain K0 = kp Kv = {lim.k0:.4g} 1/s{kp_txt}")
+    rows = [("continuous (Hurwitz, 2 zeta w0)", "continuous"),
+            ("PCT (2 zeta / Ts)", "pct"),
+            ("sampled data (ZOH at T)", "sampled"),
+            ("sampled data + 1 sample delay", "sampled_delay")]
+    width = max(len(r[0]) for r in rows)
+    print()
+    print(f"  {'limit':<{width}}  {'K0 (1/s)':>10}  {'kp (V/m)':>10}  {'K0/limit':>9}")
+    for label, name in rows:
+        val = getattr(lim, name)
+        ratio = None if lim.k0 is None else lim.k0 / val
+        print(f"  {label:<{width}}  {num(val):>10}  {num(lim.kp_limit(name)):>10}  "
+              f"{num(ratio, '.3f'):>9}")
+    if lim.k0 is not None:
+        gm = lim.gain_margin
+        gm_db = f" ({20 * np.log10(gm):.1f} dB)" if np.isfinite(gm) and gm > 0 else ""
+        print()
+        print(f"  margins at K0 = {lim.k0:.4g} 1/s (sampled loop, no delay): "
+              f"gain {num(gm)}{gm_db}, phase {num(lim.phase_margin_deg, '.1f')} deg")
+    for n in notes:
+        print("note: " + n)
     return 0
 
 
@@ -229,6 +325,39 @@ def build_parser() -> argparse.ArgumentParser:
     lz.add_argument("--x", type=float, required=True, metavar="X", help="piston position, m")
     lz.add_argument("--json", action="store_true", help="print JSON")
     lz.set_defaults(func=_cmd_linearize)
+
+    li = sub.add_parser("limits", help="gain limits of the P position loop and margins",
+                        description="Upper limits on the loop gain K0 = kp Kv (1/s) of the "
+                                    "sampled P position loop K0 / (s (s^2/w0^2 + 2 zeta s/w0 "
+                                    "+ 1)) of paper 000: continuous Hurwitz 2 zeta w0, PCT "
+                                    "2 zeta/Ts with Ts = T/2 + 1/w0, the exact sampled-data "
+                                    "limit (ZOH at T) and the same with one sample of "
+                                    "computation delay; gain and phase margins of the sampled "
+                                    "loop (no extra delay) at K0. Either PLANT.toml with --x "
+                                    "(Kv, w0, zeta from the exact linearisation there; kp and "
+                                    "T from its [controller] unless given) or the model "
+                                    "--w0, --zeta, --sample-time. In JSON an infinite margin "
+                                    "(no crossover) is written as null; without a loop gain "
+                                    "k0 and the margins are null.",
+                        epilog=EPILOG)
+    li.add_argument("plant", metavar="PLANT.toml", nargs="?", default=None,
+                    help="plant file (optional: else give --w0, --zeta, --sample-time)")
+    li.add_argument("--x", type=float, metavar="X", help="piston position, m (with PLANT.toml)")
+    li.add_argument("--w0", type=float, metavar="W0", help="natural frequency, rad/s (model)")
+    li.add_argument("--zeta", type=float, metavar="ZETA", help="damping ratio, - (model)")
+    li.add_argument("--sample-time", type=float, metavar="T",
+                    help="sample time, s (model: required; plant: default controller.sample_time)")
+    li.add_argument("--k0", type=float, metavar="K0",
+                    help="loop gain kp Kv, 1/s, for the margins "
+                         "(plant: default controller.kp * Kv)")
+    li.add_argument("--kp", type=float, metavar="KP",
+                    help="controller gain, V/m, instead of --k0 (model: needs --kv)")
+    li.add_argument("--kv", type=float, metavar="KV",
+                    help="velocity gain, m/(V s) (model only): shows the limits as kp = K0/Kv")
+    li.add_argument("--json", action="store_true",
+                    help="print JSON: k0, continuous, pct, sampled, sampled_delay (1/s), "
+                         "gain_margin, phase_margin_deg, and context; inf is written as null")
+    li.set_defaults(func=_cmd_limits)
 
     b = sub.add_parser("bench", help="run a benchmark and print ratios",
                        description="Benchmarks measure against a baseline in the same run and "

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from ..errors import InputError
 
-__all__ = ["PID", "from_plant"]
+__all__ = ["PID", "from_plant", "slow_time_constant", "pd_zero_on_slow_pole",
+           "pd_zero_on_slow_pole_at"]
 
 
 @dataclass(frozen=True)
@@ -86,3 +88,146 @@ def from_plant(plant) -> PID:
                ki=prm["controller.ki"] if kind == "pid" else 0.0,
                u_center=prm["valve.command_center"], u_min=prm["valve.command_min"],
                u_max=prm["valve.command_max"])
+
+
+# ---------------------------------------------------------------------- PD placement (paper 000)
+def _finite_positive(name: str, value, unit: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number in {unit}, got {value!r}") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise InputError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
+    return v
+
+
+def slow_time_constant(w0: float, zeta: float) -> float:
+    """Slower time constant of s^2/w0^2 + 2 zeta s/w0 + 1 for zeta > 1, s.
+
+    For zeta > 1 the factor has two real poles, time constants
+    T0 / (zeta -+ sqrt(zeta^2 - 1)) with T0 = 1/w0 (paper 000); this is the larger one,
+    T0 / (zeta - sqrt(zeta^2 - 1)) = T0 (zeta + sqrt(zeta^2 - 1)).
+
+    Parameters
+    ----------
+    w0 : float
+        Natural frequency, rad/s.
+    zeta : float
+        Damping ratio, - (must be > 1).
+
+    Raises
+    ------
+    InputError
+        zeta <= 1 (complex or double poles: no single slow real pole to cancel), or a
+        non-positive / non-finite w0.
+    """
+    w0 = _finite_positive("w0", w0, "rad/s")
+    try:
+        z = float(zeta)
+    except (TypeError, ValueError):
+        raise InputError(f"zeta must be a number, got {zeta!r}") from None
+    if not math.isfinite(z) or z <= 1.0:
+        raise InputError(
+            f"zeta = {zeta!r}: the process s^2/w0^2 + 2 zeta s/w0 + 1 has real poles only "
+            "for zeta > 1, so there is no slower real pole for the PD zero to cancel "
+            "(for zeta <= 1 use a P controller, or place the zero by another rule)")
+    # T0 (zeta + sqrt(zeta^2 - 1)) equals T0 / (zeta - sqrt(zeta^2 - 1)) without the
+    # cancellation in the denominator when zeta is large
+    return (z + math.sqrt(z * z - 1.0)) / w0
+
+
+def pd_zero_on_slow_pole(w0: float, zeta: float, kp: float, sample_time: float,
+                         u_center: float = 0.0, u_min: float = float("-inf"),
+                         u_max: float = float("inf")) -> PID:
+    """PD controller whose zero cancels the slower real process pole (paper 000).
+
+    The process Kv / (s (s^2/w0^2 + 2 zeta s/w0 + 1)) with zeta > 1 has the real
+    poles -1/tau_slow, -1/tau_fast. The PD kp + kd s = kp (1 + (kd/kp) s) with
+    kd/kp = tau_slow puts its zero on -1/tau_slow, leaving the loop
+    kp Kv / (s (1 + tau_fast s)).
+
+    Parameters
+    ----------
+    w0 : float
+        Natural frequency of the process, rad/s.
+    zeta : float
+        Damping ratio, - (> 1).
+    kp : float
+        Proportional gain, V/m (> 0).
+    sample_time : float
+        T, s.
+    u_center : float
+        Command at zero error, V.
+    u_min, u_max : float
+        Command range, V.
+
+    Returns
+    -------
+    PID
+        With kd = kp tau_slow, V s/m, and ki = 0.
+
+    Raises
+    ------
+    InputError
+        zeta <= 1 (no real poles to cancel), non-positive w0, kp or sample_time.
+
+    Examples
+    --------
+    >>> pd = pd_zero_on_slow_pole(w0=32.97, zeta=1.1, kp=10.0, sample_time=0.01)
+    >>> round(pd.kd / pd.kp, 4)      # tau_slow = (1.1 + sqrt(0.21)) / 32.97 s
+    0.0473
+    """
+    tau = slow_time_constant(w0, zeta)
+    kp = _finite_positive("kp", kp, "V/m")
+    return PID(kp=kp, sample_time=_finite_positive("sample_time", sample_time, "s"),
+               kd=kp * tau, u_center=u_center, u_min=u_min, u_max=u_max)
+
+
+def pd_zero_on_slow_pole_at(plant, x: float, kp: float | None = None,
+                            k0: float | None = None,
+                            sample_time: float | None = None) -> PID:
+    """:func:`pd_zero_on_slow_pole` for a plant, from its reduced model at position ``x``.
+
+    Linearises the plant exactly at the equilibrium at ``x`` (m) and fits Kv, w0, zeta
+    (:func:`workbench.linearize.reduced_position_model`). The command centre and range
+    are the valve's.
+
+    Parameters
+    ----------
+    plant : workbench.Plant
+    x : float
+        Piston position, m.
+    kp : float, optional
+        Proportional gain, V/m; default the plant file's ``controller.kp``.
+    k0 : float, optional
+        Loop gain kp Kv, 1/s, instead of kp (kp = k0 / Kv).
+    sample_time : float, optional
+        T, s; default the plant file's ``controller.sample_time``.
+
+    Raises
+    ------
+    InputError
+        Both or neither of kp / k0 with no [controller] to fall back on, no sample
+        time, or zeta <= 1 at ``x``.
+    """
+    from .. import linearize
+    prm = plant.params
+    if kp is not None and k0 is not None:
+        raise InputError("give the controller gain kp (V/m) or the loop gain k0 (1/s), "
+                         "not both")
+    if sample_time is None:
+        if not prm.has_controller:
+            raise InputError("the plant file has no [controller] section, so the sample "
+                             "time must be given", source=prm.source)
+        sample_time = prm["controller.sample_time"]
+    red = linearize.reduced_position_model(linearize.tangent(plant, x=x))
+    if k0 is not None:
+        kp = _finite_positive("k0", k0, "1/s") / red.kv
+    elif kp is None:
+        if not prm.has_controller:
+            raise InputError("give kp (V/m) or k0 (1/s): the plant file has no "
+                             "[controller] section", source=prm.source)
+        kp = prm["controller.kp"]
+    return pd_zero_on_slow_pole(red.w0, red.zeta, kp, sample_time,
+                                u_center=prm["valve.command_center"],
+                                u_min=prm["valve.command_min"], u_max=prm["valve.command_max"])
