@@ -43,6 +43,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
          f"{s['valve_flow_full_opening_l_min_anr']:.0f} l/min ANR "
          f"({s['valve_flow_full_opening_kg_s'] * 1e3:.2f} g/s, supply -> atmosphere)"),
         ("moving mass", f"{prm['load.mass']:.3f} kg"),
+        ("valve law", s.get("valve_law", "iso6358")),
         ("effects", ", ".join(s["effects"]) or "none (nominal model)"),
         ("states", f"{len(s['states'])}: {', '.join(s['states'][:8])}"
                    + (" ..." if len(s["states"]) > 8 else "")),
@@ -188,6 +189,60 @@ def _cmd_limits(args: argparse.Namespace) -> int:
               f"gain {num(gm)}{gm_db}, phase {num(lim.phase_margin_deg, '.1f')} deg")
     for n in notes:
         print("note: " + n)
+    return 0
+
+
+def _cmd_map(args: argparse.Namespace) -> int:
+    from .plant import Plant
+    from .controllers import PID, from_plant
+    from .errors import InputError
+    from .stability import maps
+    from . import plots
+    plant = Plant.from_toml(args.plant)
+    xa, ya = maps.parse_axis(args.x_axis), maps.parse_axis(args.y_axis)
+    if plant.params.has_controller:
+        ctrl = from_plant(plant)
+        ctrl_d = {"kp": ctrl.kp, "kd": ctrl.kd, "ki": ctrl.ki, "sample_time": ctrl.sample_time}
+    else:
+        ctrl_d = {"kp": None, "kd": 0.0, "ki": 0.0, "sample_time": None}
+    for key in ("kp", "kd", "ki", "sample_time"):
+        val = getattr(args, key)
+        if val is not None:
+            ctrl_d[key] = val
+    axes = {xa.name, ya.name}
+    if ctrl_d["sample_time"] is None and "sample_time" not in axes:
+        raise InputError("no sample time: the plant file has no [controller]; give --sample-time")
+    if ctrl_d["kp"] is None and not axes & {"kp", "k0"}:
+        raise InputError("no gain: the plant file has no [controller]; give --kp or sweep kp/k0")
+    ctrl_d["kp"] = ctrl_d["kp"] or 1.0
+    ctrl_d["sample_time"] = ctrl_d["sample_time"] or 0.01
+    smap = maps.stability_map(plant, xa, ya, position=args.position, controller=ctrl_d,
+                              delay_samples=args.delay, scheduler=args.scheduler,
+                              workers=args.workers, progress=not args.quiet and None)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    smap.to_csv(out / "map.csv")
+    from .params import atomic_write_text
+    summary = {k: v for k, v in smap.as_dict().items() if k != "rho"}
+    summary["files"] = {"csv": str(out / "map.csv"), "json": str(out / "map.json"),
+                        "png": str(out / "map.png")}
+    atomic_write_text(out / "map.json", json.dumps(smap.as_dict(), indent=1) + "\n")
+    if not args.no_plot:
+        plots.save_figure(plots.stability_map_figure(smap), out / "map.png")
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    rho = smap.rho
+    print(f"stability map {len(xa)} x {len(ya)} = {rho.size} points in {smap.elapsed_s:.2f} s "
+          f"({smap.points_per_s:,.0f} points/s)")
+    print(f"  x: {xa.label} {xa.values[0]:g} .. {xa.values[-1]:g};  y: {ya.label} "
+          f"{ya.values[0]:g} .. {ya.values[-1]:g}")
+    print(f"  stable: {100 * np.mean(smap.stable):.1f} % of points;  |z|max "
+          f"{np.nanmin(rho):.4f} .. {np.nanmax(rho):.4f}")
+    for note in smap.notes:
+        print(f"  note: {note}")
+    print(f"  wrote {out / 'map.csv'}, {out / 'map.json'}"
+          + ("" if args.no_plot else f", {out / 'map.png'}"))
     return 0
 
 
@@ -358,6 +413,44 @@ def build_parser() -> argparse.ArgumentParser:
                     help="print JSON: k0, continuous, pct, sampled, sampled_delay (1/s), "
                          "gain_margin, phase_margin_deg, and context; inf is written as null")
     li.set_defaults(func=_cmd_limits)
+
+    mp = sub.add_parser("map", help="stability map over two swept parameters",
+                        description="Sweep two parameters and colour the plane by the largest "
+                                    "closed-loop pole magnitude |z|max of the exact sampled-data "
+                                    "position loop (equilibrium, exact tangent model, ZOH at T, "
+                                    "the discrete controller, optional computation delay) at "
+                                    "every point; for a P controller the PCT and continuous "
+                                    "limits are drawn over it. An axis is NAME=START:STOP[:NUM]"
+                                    "[:log]; NAME is a plant parameter (dotted, SI: load.mass, "
+                                    "supply.pressure, lines.length, ...; short: mass, "
+                                    "supply_pressure, line_length), position (m), kp (V/m), kd "
+                                    "(V s/m), ki (V/(m s)), k0 (loop gain kp*Kv, 1/s) or "
+                                    "sample_time (s). Runs on all local cores, or on a Dask "
+                                    "cluster with --scheduler. Writes DIR/map.csv (one row per "
+                                    "point), DIR/map.json and DIR/map.png.",
+                        epilog=EPILOG + " Example: workbench map designs/plants/situm_rodless.toml "
+                                        "--x-axis k0=1:90:100 --y-axis mass=0.3:5:100 --out map/")
+    mp.add_argument("plant", metavar="PLANT.toml", help="plant file")
+    mp.add_argument("--x-axis", required=True, metavar="NAME=START:STOP[:NUM]", help="horizontal axis")
+    mp.add_argument("--y-axis", required=True, metavar="NAME=START:STOP[:NUM]", help="vertical axis")
+    mp.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
+    mp.add_argument("--position", type=float, metavar="X",
+                    help="piston position of the equilibrium, m (default mid-stroke)")
+    mp.add_argument("--kp", type=float, help="controller gain, V/m (default: plant file)")
+    mp.add_argument("--kd", type=float, help="derivative gain, V s/m (default: plant file)")
+    mp.add_argument("--ki", type=float, help="integral gain, V/(m s) (default: plant file)")
+    mp.add_argument("--sample-time", dest="sample_time", type=float, metavar="T",
+                    help="sample time, s (default: plant file)")
+    mp.add_argument("--delay", type=int, default=0, metavar="N",
+                    help="samples of computation delay (default 0)")
+    mp.add_argument("--scheduler", metavar="ADDRESS",
+                    help="Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: local cores)")
+    mp.add_argument("--workers", type=int, metavar="N",
+                    help="local worker processes (default: all cores)")
+    mp.add_argument("--json", action="store_true", help="print a JSON summary")
+    mp.add_argument("--no-plot", action="store_true", help="do not write map.png")
+    mp.add_argument("--quiet", action="store_true", help="no progress bar")
+    mp.set_defaults(func=_cmd_map)
 
     b = sub.add_parser("bench", help="run a benchmark and print ratios",
                        description="Benchmarks measure against a baseline in the same run and "

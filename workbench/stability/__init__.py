@@ -17,8 +17,10 @@ from .limits import (
     unit_circle_crossings,
     zoh_position_loop,
 )
+from .maps import Axis, StabilityMap, parse_axis, stability_map
 
 __all__ = [
+    "Axis", "StabilityMap", "stability_map", "parse_axis",
     "GainLimits", "gain_limits", "limits_from_plant", "sampled_gain_limit",
     "unit_circle_crossings", "zoh_position_loop", "pct_time_constant",
     "continuous_limit", "pct_limit", "closed_loop_poles", "pct_closed_loop_poles",
