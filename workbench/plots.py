@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["replay_figure", "trajectory_figure", "save_figure", "validation_figure",
-           "compare_figure", "stability_map_figure"]
+           "compare_figure", "stability_map_figure", "pole_step_figure"]
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> None:
@@ -260,4 +260,43 @@ def stability_map_figure(smap, title: str | None = None):
     ax.set_title(title or f"Stability map{': ' + extra if extra else ''}", fontsize=11)
     if handles:
         ax.legend(handles=handles, loc="best", fontsize=8, framealpha=0.85)
+    return fig
+
+
+def pole_step_figure(poles: Mapping[str, np.ndarray], t: np.ndarray,
+                     steps: Mapping[str, np.ndarray], title: str = ""):
+    """z-plane poles (left, unit circle) and unit-step responses (right) of several models."""
+    fig, (ax_z, ax_s) = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True,
+                                     gridspec_kw={"width_ratios": [1, 1.35]})
+    th = np.linspace(0, 2 * np.pi, 400)
+    ax_z.plot(np.cos(th), np.sin(th), color="0.5", lw=0.8)
+    markers = ["o", "x", "s", "^", "d"]
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (label, p) in enumerate(poles.items()):
+        p = np.asarray(p)
+        ax_z.plot(p.real, p.imag, markers[i % len(markers)], color=colours[i % len(colours)],
+                  ms=8, mfc="none" if markers[i % len(markers)] in "osd^" else None, mew=1.6,
+                  label=label)
+    allp = np.concatenate([np.asarray(p) for p in poles.values()])
+    lo = min(0.0, float(allp.real.min()) - 0.05)
+    ax_z.set_xlim(lo, 1.05)
+    half = max(0.2, float(np.abs(allp.imag).max()) + 0.05, (1.05 - lo) / 2)
+    ax_z.set_ylim(-half, half)
+    ax_z.set_aspect("equal", adjustable="box")
+    ax_z.axhline(0, color="0.7", lw=0.6)
+    ax_z.set_xlabel("Re z [-]")
+    ax_z.set_ylabel("Im z [-]")
+    ax_z.set_title("closed-loop poles (unit circle in grey)", fontsize=10)
+    ax_z.grid(True, alpha=0.3)
+    ax_z.legend(fontsize=8, loc="lower left")
+    for i, (label, y) in enumerate(steps.items()):
+        ax_s.step(t, np.asarray(y).ravel()[:len(t)], where="post", color=colours[i % len(colours)],
+                  label=label)
+    ax_s.set_xlabel("time t [s]")
+    ax_s.set_ylabel("position / reference step [-]")
+    ax_s.set_title("closed-loop unit-step responses", fontsize=10)
+    ax_s.grid(True, alpha=0.3)
+    ax_s.legend(fontsize=8, loc="lower right")
+    if title:
+        fig.suptitle(title, fontsize=11)
     return fig
