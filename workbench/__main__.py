@@ -320,9 +320,26 @@ def _as_recording_columns(run, rec):
                      source="<simulation>")
 
 
+#: Modules of :mod:`workbench.identify` that add a ``workbench identify`` sub-command.
+IDENTIFY_MODULES = ("arx", "rls", "valve_fit", "grey_box")
+
+#: ``workbench bench NAME``: "module:function" taking ``quick`` and returning a dict.
+BENCHMARKS = {
+    "simulate": "workbench.bench:bench_simulate",
+    "sweep": "workbench.stability.maps:bench",
+    "rls": "workbench.identify.rls:bench",
+    "greybox": "workbench.identify.grey_box:bench",
+}
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from . import bench
-    result = bench.run(args.name, quick=args.quick)
+    import importlib
+    mod_name, fun_name = BENCHMARKS[args.name].split(":")
+    try:
+        fun = getattr(importlib.import_module(mod_name), fun_name)
+    except (ImportError, AttributeError) as exc:
+        raise WorkbenchError(f"benchmark '{args.name}' is not available: {exc}") from exc
+    result = fun(quick=args.quick)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -452,12 +469,28 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--quiet", action="store_true", help="no progress bar")
     mp.set_defaults(func=_cmd_map)
 
+    ident = sub.add_parser("identify", help="models from recordings: arx, rls, valve, greybox",
+                           description="Identification from recorded data. Each method has its "
+                                       "own sub-command; --help on each.",
+                           epilog=EPILOG)
+    isub = ident.add_subparsers(dest="method", metavar="METHOD")
+    isub.required = True
+    import importlib
+    for mod in IDENTIFY_MODULES:
+        try:
+            importlib.import_module(f"workbench.identify.{mod}").add_cli(isub)
+        except (ImportError, AttributeError):
+            continue            # a method not (yet) built
+
     b = sub.add_parser("bench", help="run a benchmark and print ratios",
                        description="Benchmarks measure against a baseline in the same run and "
                                    "print ratios. NAME: simulate (closed-loop 24 s, 25 mm "
-                                   "reference plant, vs scipy solve_ivp LSODA).",
+                                   "reference plant, vs scipy solve_ivp LSODA); sweep (200 x 200 "
+                                   "stability map vs a python-control loop); rls (RLS over 10^6 "
+                                   "samples vs a numpy loop); greybox (4 parameters from a 20 s, "
+                                   "1 kHz recording).",
                        epilog=EPILOG)
-    b.add_argument("name", choices=("simulate",), help="benchmark")
+    b.add_argument("name", choices=tuple(BENCHMARKS), help="benchmark")
     b.add_argument("--json", action="store_true", help="print JSON")
     b.add_argument("--quick", action="store_true", help="shorter run (smoke test)")
     b.set_defaults(func=_cmd_bench)
