@@ -347,6 +347,7 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
     state = _initial(plant, x0)
     ix = plant.state_index("x")
     iv = plant.state_index("v")
+    ipa, ipb = plant.state_index("p_a"), plant.state_index("p_b")
 
     events = np.union1d(t_ctrl, out_t)
     # merge events closer than 1e-9 s
@@ -375,7 +376,8 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
 
     def control_at(k_ev: int) -> None:
         nonlocal cstate, u_now
-        y = {"x": _quantise(float(state[ix]), position_resolution), "v": float(state[iv])}
+        y = {"x": _quantise(float(state[ix]), position_resolution), "v": float(state[iv]),
+             "p_a": float(state[ipa]), "p_b": float(state[ipb])}
         r = float(reference(events[k_ev]))
         cstate, u_cmd = controller.update(cstate, r, y)
         u_cmd = _quantise(float(np.clip(u_cmd, u_min, u_max)), command_resolution)

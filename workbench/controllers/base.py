@@ -23,4 +23,8 @@ class DiscreteController(Protocol):
         """Initial controller state."""
 
     def update(self, state: Any, r: float, y: dict[str, float]) -> tuple[Any, float]:
-        """(new state, command in V) from the reference (m) and measurements (SI)."""
+        """(new state, command in V) from the reference (m) and measurements (SI).
+
+        ``y`` holds the sampled position ``x`` (m, after the ADC's resolution),
+        velocity ``v`` (m/s) and chamber pressures ``p_a``, ``p_b`` (Pa abs).
+        """
