@@ -329,6 +329,7 @@ BENCHMARKS = {
     "sweep": "workbench.stability.maps:bench",
     "rls": "workbench.identify.rls:bench",
     "greybox": "workbench.identify.grey_box:bench",
+    "mpc": "workbench.controllers.mpc:bench",
 }
 
 
@@ -488,7 +489,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "reference plant, vs scipy solve_ivp LSODA); sweep (200 x 200 "
                                    "stability map vs a python-control loop); rls (RLS over 10^6 "
                                    "samples vs a numpy loop); greybox (4 parameters from a 20 s, "
-                                   "1 kHz recording).",
+                                   "1 kHz recording); mpc (NMPC solve times over a 20 s closed "
+                                   "loop, vs do-mpc when installed).",
                        epilog=EPILOG)
     b.add_argument("name", choices=tuple(BENCHMARKS), help="benchmark")
     b.add_argument("--json", action="store_true", help="print JSON")
