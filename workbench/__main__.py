@@ -330,6 +330,7 @@ BENCHMARKS = {
     "rls": "workbench.identify.rls:bench",
     "greybox": "workbench.identify.grey_box:bench",
     "mpc": "workbench.controllers.mpc:bench",
+    "diagnose": "workbench.diagnose.bench:bench",
 }
 
 
@@ -483,6 +484,11 @@ def build_parser() -> argparse.ArgumentParser:
         except (ImportError, AttributeError):
             continue            # a method not (yet) built
 
+    try:
+        importlib.import_module("workbench.diagnose.cli").add_cli(sub)
+    except (ImportError, AttributeError):
+        pass                    # diagnosis not (yet) built
+
     b = sub.add_parser("bench", help="run a benchmark and print ratios",
                        description="Benchmarks measure against a baseline in the same run and "
                                    "print ratios. NAME: simulate (closed-loop 24 s, 25 mm "
@@ -490,7 +496,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "stability map vs a python-control loop); rls (RLS over 10^6 "
                                    "samples vs a numpy loop); greybox (4 parameters from a 20 s, "
                                    "1 kHz recording); mpc (NMPC solve times over a 20 s closed "
-                                   "loop, vs do-mpc when installed).",
+                                   "loop, vs do-mpc when installed); diagnose (24 s, 1 kHz "
+                                   "recording, all candidate effects).",
                        epilog=EPILOG)
     b.add_argument("name", choices=tuple(BENCHMARKS), help="benchmark")
     b.add_argument("--json", action="store_true", help="print JSON")
