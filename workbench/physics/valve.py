@@ -62,6 +62,11 @@ def effective_opening(s, deadband=0.0):
     opening = sign(s) max(|s| - d, 0) / (1 - d), written as (s - clip(s, -d, d))/(1 - d)
     so that with d = 0 it is exactly s (slope 1 through the centre).
     """
+    if not is_symbolic(deadband) and deadband == 0.0:
+        # no overlap: the opening is the command itself. (The clip form below would
+        # also give s, but its derivative at s = 0 hits the fmin/fmax tie and comes
+        # out 0.75 instead of 1 -- wrong for every tangent model at the centre.)
+        return s
     return (s - _clip(s, -deadband, deadband)) / (1.0 - deadband)
 
 
