@@ -104,3 +104,20 @@ def test_deadband_gives_zero_small_signal_gain(situm):
     assert np.allclose(lin.B, 0.0)
     with pytest.raises(Exception, match="no small-signal effect"):
         linearize.reduced_position_model(lin)
+
+
+def test_valve_gain_at_the_centre_matches_central_differences():
+    """At the equilibrium the command sits exactly on the valve centre, where the
+    openings have a kink. CasADi's derivative there must equal the central difference
+    (the mean of the one-sided gains) -- a regression test for a derivative that came
+    out 0.75x through an fmin/fmax tie in the deadband clip."""
+    from workbench import Plant, linearize
+    plant = Plant.from_toml("designs/plants/rig25_mpye.toml")
+    op = linearize.operating_point(plant, 0.25)
+    lin = linearize.tangent(plant, op)
+    h = 1e-6                                       # V; the flow is smooth on each side
+    fp = np.asarray(plant.f(op.state, op.u + h, op.params)).ravel()
+    fm = np.asarray(plant.f(op.state, op.u - h, op.params)).ravel()
+    fd = (fp - fm) / (2 * h)
+    # piecewise-smooth: the central difference is exact up to O(h) curvature terms
+    np.testing.assert_allclose(lin.B[:, 0], fd, rtol=1e-5, atol=1e-9 * np.abs(fd).max())
