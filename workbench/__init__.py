@@ -11,7 +11,19 @@ from .plant import Plant
 
 __version__ = "0.1.0"
 
+#: Sub-packages imported on first use (they pull in reportlab, dask, matplotlib...).
+_LAZY = ("stability", "validate", "report", "identify", "diagnose", "plots", "recording")
+
 __all__ = [
     "InputError", "WorkbenchError", "Plant", "PlantParams",
-    "controllers", "linearize", "physics", "simulate", "units", "__version__",
+    "controllers", "linearize", "physics", "simulate", "units", "__version__", *_LAZY,
 ]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+        module = importlib.import_module(f".{name}", __name__)
+        globals()[name] = module
+        return module
+    raise AttributeError(f"module 'workbench' has no attribute {name!r}")
