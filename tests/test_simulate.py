@@ -126,13 +126,95 @@ def test_bad_simulation_input(rig25):
 
 
 def test_compiled_loop_matches_cvodes_loop(rig25):
-    # The compiled Radau loop (used by the benchmark) runs the same controller law;
-    # it must agree with the CVODES loop within the 0.1 % of stroke, and the
-    # Radau IIA 10-substep error is far below that (measured ~1e-5 m over 24 s).
+    # The compiled loop (used by the benchmark) runs the same controller law; it must
+    # agree with the CVODES loop within the 0.1 % of stroke, and the default
+    # ROS4 14-substep error is far below that (measured ~2e-5 m over 24 s of steps).
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.1, 0.4], hold=0.6)
     tight = simulate.closed_loop(rig25, ctrl, ref, x0=0.25, rtol=1e-10, atol=1e-12)
-    comp = simulate.CompiledLoop(rig25, ctrl, substeps=10, jit=False).run(ref, 1.2, 0.25)
-    assert comp.time[::10].shape == tight.time.shape
-    assert np.max(np.abs(comp["x"][::10] - tight["x"])) < 1e-4
-    assert np.allclose(comp["u"][::10][:-1], tight["u"][:-1], atol=1e-2)
+    comp = simulate.CompiledLoop(rig25, ctrl, jit=False).run(ref, 1.2, 0.25)
+    assert comp.time.shape == tight.time.shape
+    assert np.allclose(comp.time, tight.time)
+    assert np.max(np.abs(comp["x"] - tight["x"])) < 1e-4
+    assert np.allclose(comp["u"][:-1], tight["u"][:-1], atol=1e-2)
+    assert comp["r"][-1] == pytest.approx(tight["r"][-1])
+    # outputs are the plant's h on the reported states
+    h = np.array([rig25.evaluate_h(s, u) for s, u in zip(comp.states[::40], comp["u"][::40])])
+    assert np.allclose(comp.outputs[::40], h, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("method, substeps, bound",
+                         [("rodas4", 12, 1e-4), ("radau", 10, 1e-4), ("ros2", 10, 5e-2)])
+def test_compiled_loop_other_methods(rig25, method, substeps, bound):
+    ctrl = controllers.from_plant(rig25)
+    ref = simulate.steps([0.1, 0.4], hold=0.3)
+    tight = simulate.closed_loop(rig25, ctrl, ref, x0=0.25, rtol=1e-10, atol=1e-12)
+    comp = simulate.CompiledLoop(rig25, ctrl, substeps=substeps, method=method).run(ref, 0.6, 0.25)
+    assert comp.info["method"] == f"{method}-compiled"
+    assert np.max(np.abs(comp["x"] - tight["x"])) < bound
+
+
+def test_compiled_loop_every_substep(rig25):
+    ctrl = controllers.from_plant(rig25)
+    ref = simulate.steps([0.3], hold=0.1)
+    loop = simulate.CompiledLoop(rig25, ctrl, substeps=4)
+    coarse = loop.run(ref, 0.1, 0.25)
+    fine = loop.run(ref, 0.1, 0.25, every_substep=True)
+    assert fine.time.shape == (41,) and np.allclose(np.diff(fine.time), 0.0025)
+    assert np.array_equal(fine.states[::4], coarse.states)
+    u = fine["u"][:-1].reshape(-1, 4)            # held over each period
+    assert np.all(u == u[:, :1])
+
+
+def test_compiled_step_orders():
+    # The step kernels have their nominal orders on a smooth problem (Van der Pol,
+    # mu = 1): halving h divides the error by ~2^p (ROS4 and RODAS p = 4, Radau IIA
+    # p = 5), which checks the transcribed coefficients.
+    def f(z, u):
+        return ca.vertcat(z[1], (1 - z[0] ** 2) * z[1] - z[0] + 0.1 * u)
+
+    def integrate(builder, h, **kw):
+        step = builder(f, 2, h, **kw)
+        x, aux = np.array([2.0, 0.0]), np.zeros(step.size1_in(2))
+        for _ in range(int(round(1.0 / h))):
+            x, aux = (np.asarray(v).ravel() for v in step(x, 1.0, aux))
+        return x
+
+    ref = integrate(simulate._rodas4_step, 1e-3 / 4)
+    for name, builder, kw, order in (("ros4", simulate._ros4_step, {}, 4),
+                                     ("rodas4", simulate._rodas4_step, {}, 4),
+                                     ("radau", simulate._radau_step, {"newton_iterations": 8}, 5)):
+        e1, e2 = (np.max(np.abs(integrate(builder, h, **kw) - ref)) for h in (0.05, 0.025))
+        assert np.log2(e1 / e2) == pytest.approx(order, abs=0.3), name
+
+
+def test_compiled_loop_native_matches_vm(rig25):
+    # The C driver runs the same kernels as the virtual machine: the same numbers up
+    # to rounding (the C is built with x/c as x*(1/c)). The build (a few seconds
+    # with gcc) is cached in the temp directory.
+    import shutil
+    if not (shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")):
+        pytest.skip("no C compiler")
+    ctrl = controllers.from_plant(rig25)
+    ref = simulate.steps([0.1, 0.4], hold=0.3)
+    native = simulate.CompiledLoop(rig25, ctrl, jit=True)
+    assert native.compile(), native.native_error
+    vm = simulate.CompiledLoop(rig25, ctrl, jit=False)
+    a, b = native.run(ref, 0.6, 0.25), vm.run(ref, 0.6, 0.25)
+    assert a.info["native"] and not b.info["native"]
+    assert np.allclose(a.states, b.states, rtol=1e-12, atol=1e-12)
+    assert np.allclose(a.outputs, b.outputs, rtol=1e-12, atol=1e-9)
+    assert np.allclose(a["u"], b["u"], rtol=0, atol=1e-10)
+    fa = native.run(ref, 0.6, 0.25, every_substep=True)
+    fb = vm.run(ref, 0.6, 0.25, every_substep=True)
+    assert np.allclose(fa.states, fb.states, rtol=1e-12, atol=1e-12)
+
+
+def test_compiled_loop_bad_input(rig25):
+    ctrl = controllers.from_plant(rig25)
+    with pytest.raises(InputError, match="method"):
+        simulate.CompiledLoop(rig25, ctrl, method="euler")
+    with pytest.raises(InputError, match="substeps"):
+        simulate.CompiledLoop(rig25, ctrl, substeps=0)
+    with pytest.raises(InputError, match="controller"):
+        simulate.CompiledLoop(rig25, object())
