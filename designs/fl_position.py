@@ -78,38 +78,10 @@ def main(argv=None) -> int:
                     help="output folder (default reports/fl_position)")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    done: list = []
-    try:
-        return _design(args, out, done, t_start)
-    except Exception as exc:   # noqa: BLE001 - any failure must still leave a report
-        step = getattr(exc, "design_step", "start")
-        rp.write_failure(out, TITLE, exc, step=step, partial_sections=done,
-                         provenance=rp.provenance(plant_file=PLANT,
-                                                  command_line=" ".join(sys.argv)))
-        print(f"design FAILED at step '{step}': {exc}\n  report: {out / 'report.html'}",
-              file=sys.stderr)
-        return 1
+    return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 
 
-class _Step:
-    """Context manager that tags an exception with the design step it came from."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        print(f"[{time.strftime('%H:%M:%S')}] {name} ...", flush=True)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, etype, exc, tb):
-        if exc is not None and not hasattr(exc, "design_step"):
-            try:
-                exc.design_step = self.name
-            except AttributeError:
-                pass
-        return False
 
 
 def step_tracking(run, fl, reference, x0: float):
@@ -153,7 +125,7 @@ def metrics_row(v: validate.Validation) -> dict:
 def _design(args, out: Path, done: list, t_start: float) -> int:
     quick = args.quick
     FIG_DPI["value"] = 60 if quick else 170
-    with _Step("load plants"):
+    with rp.step("load plants"):
         rig = Plant.from_toml(PLANT)
         prm = rig.params
         T = prm["controller.sample_time"]
@@ -189,7 +161,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             ]),
         ]))
 
-    with _Step("control model"):
+    with rp.step("control model"):
         valve = ValveInversion.from_plant(rig, law="input_affine", compensate=False)
         model = DriveModel.from_plant(rig, valve=valve)
         done.append(rp.Section("Control model", [
@@ -207,7 +179,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                            model.balance_pressure() / 1e5, "bar abs")]),
         ]))
 
-    with _Step("FL design"):
+    with rp.step("FL design"):
         ref_val = validate.validation_profile(rig, **(_quick_profile() if quick else {}))
         fl = feedback_linearizing(rig, BANDWIDTH, damping=DAMPING, model=model,
                                   reference=ref_val)
@@ -259,7 +231,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                      caption="Refused designs and their reasons"),
         ]))
 
-    with _Step("must-show: reference model on the nominal affine plant"):
+    with rp.step("must-show: reference model on the nominal affine plant"):
         ref_ms = simulate.steps([0.25, 0.35, 0.15, 0.16, 0.25], hold=0.6 if quick else 1.5)
         fl_aff = feedback_linearizing(affine, BANDWIDTH, damping=DAMPING, reference=ref_ms)
         run_ms = simulate.closed_loop(affine, fl_aff, ref_ms, x0=0.25,
@@ -285,7 +257,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                            "and the error x - x_r"),
         ]))
 
-    with _Step("PD design"):
+    with rp.step("PD design"):
         spec = validate.Specification()
         u_c, u_lo, u_hi = (prm["valve.command_center"], prm["valve.command_min"],
                            prm["valve.command_max"])
@@ -319,7 +291,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                      units=["V/m", "V s/m", "-", ""], caption="PD candidates"),
         ]))
 
-    with _Step("validation"):
+    with rp.step("validation"):
         v_fl_full = validate.validate(full, fl, spec=spec, reference=ref_val,
                                       label="FL, full plant", progress=False)
         v_fl_nom = validate.validate(rig, fl, spec=spec, reference=ref_val,
@@ -379,7 +351,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                       "FL on the full plant with the settling bands"),
         ]))
 
-    with _Step("write report"):
+    with rp.step("write report"):
         refusals_ok = all("refused" in r[2] for r in refused)
         # quick mode (short holds, coarse lines) only smoke-tests the chain: the
         # validations there are not meant to pass

@@ -79,38 +79,10 @@ def main(argv=None) -> int:
                     help="output folder (default reports/force_tracking)")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    done: list = []
-    try:
-        return _design(args, out, done, t_start)
-    except Exception as exc:   # noqa: BLE001 - any failure must still leave a report
-        step = getattr(exc, "design_step", "start")
-        rp.write_failure(out, TITLE, exc, step=step, partial_sections=done,
-                         provenance=rp.provenance(plant_file=PLANT,
-                                                  command_line=" ".join(sys.argv)))
-        print(f"design FAILED at step '{step}': {exc}\n  report: {out / 'report.html'}",
-              file=sys.stderr)
-        return 1
+    return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 
 
-class _Step:
-    """Context manager that tags an exception with the design step it came from."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        print(f"[{time.strftime('%H:%M:%S')}] {name} ...", flush=True)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, etype, exc, tb):
-        if exc is not None and not hasattr(exc, "design_step"):
-            try:
-                exc.design_step = self.name
-            except AttributeError:
-                pass
-        return False
 
 
 def force_metrics(run, profile) -> dict:
@@ -133,7 +105,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
     FIG_DPI["value"] = 60 if quick else 170
     profile = smooth_profile(QUICK_PROFILE if quick else PROFILE)
     duration = profile.duration
-    with _Step("plants"):
+    with rp.step("plants"):
         rig = Plant.from_toml(PLANT)
         prm = rig.params
         T = prm["controller.sample_time"]
@@ -166,7 +138,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             ]),
         ]))
 
-    with _Step("pressure plans"):
+    with rp.step("pressure plans"):
         tp = np.arange(0.0, duration + 1e-9, 1e-3)
         plans = {rule: pressure_plan(model, tp, profile, x=X_LOCK, rule=rule) for rule in PLAN_RULES}
         rows = []
@@ -202,7 +174,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                                                     "pressures and commands of the three rules"),
         ]))
 
-    with _Step("closed loop"):
+    with rp.step("closed loop"):
         ctrl = force_tracker(rig, BANDWIDTH, preview=profile, model=model)
         ff_only = force_tracker(rig, 1e-6, preview=profile, model=model)
         cases = [("nominal affine plant", affine_locked, ctrl),
@@ -285,7 +257,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                                     "single-valve plan) and commands of the closed-loop runs"))
         done.append(rp.Section("Force tracking in closed loop", blocks))
 
-    with _Step("write report"):
+    with rp.step("write report"):
         design_ok = ok_nominal and not errors
         msg = (f"force follows the profile on the nominal plant within "
                f"{nominal['max_error']:.2f} N (RMS {nominal['rms_error']:.3f} N); on the rig's "

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench import Plant, controllers, linearize, plots, simulate
+from workbench import Plant, controllers, linearize, plots
 from workbench import report as rp
 from workbench import stability, validate
 from workbench.params import atomic_write_text
@@ -74,44 +74,15 @@ def main(argv=None) -> int:
                     help="output folder (default reports/situm_p_pd)")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    done: list = []            # finished sections, kept for a failure report
-    step = "start"
-    try:
-        return _design(args, out, done, t_start)
-    except Exception as exc:   # noqa: BLE001 - any failure must still leave a report
-        step = getattr(exc, "design_step", step)
-        rp.write_failure(out, TITLE, exc, step=step, partial_sections=done,
-                         provenance=rp.provenance(plant_file=PLANT,
-                                                  command_line=" ".join(sys.argv)))
-        print(f"design FAILED at step '{step}': {exc}\n  report: {out / 'report.html'}",
-              file=sys.stderr)
-        return 1
+    return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 
 
-class _Step:
-    """Context manager that tags an exception with the design step it came from."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        print(f"[{time.strftime('%H:%M:%S')}] {name} ...", flush=True)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, etype, exc, tb):
-        if exc is not None and not hasattr(exc, "design_step"):
-            try:
-                exc.design_step = self.name
-            except AttributeError:
-                pass
-        return False
 
 
 def _design(args, out: Path, done: list, t_start: float) -> int:
     quick = args.quick
-    with _Step("load plant"):
+    with rp.step("load plant"):
         plant = Plant.from_toml(PLANT)
         summ = plant.summary()
         prm = plant.params
@@ -134,7 +105,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             ]),
         ]))
 
-    with _Step("exact linearisation"):
+    with rp.step("exact linearisation"):
         op = linearize.operating_point(plant, X_DESIGN)
         lin = linearize.tangent(plant, op)
         red = linearize.reduced_position_model(lin)
@@ -173,7 +144,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                   "and the position does not see."),
         ]))
 
-    with _Step("gain limits"):
+    with rp.step("gain limits"):
         T = prm["controller.sample_time"]
         kp_p = prm["controller.kp"]
         lim_paper = stability.gain_limits(TABLE_II["w0"], TABLE_II["zeta"], TABLE_II["T"],
@@ -208,14 +179,14 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                       else "Table II limits NOT reproduced"),
         ]))
 
-    with _Step("controllers"):
+    with rp.step("controllers"):
         kp_pd0, kd_pd0, k0_pd0 = pd_design(red.w0, red.zeta, red.kv, T)
         u_c, u_lo, u_hi = (prm["valve.command_center"], prm["valve.command_min"],
                            prm["valve.command_max"])
         p_ctrl = controllers.PID(kp=kp_p, sample_time=T, u_center=u_c, u_min=u_lo, u_max=u_hi)
         tau_slow = controllers.slow_time_constant(red.w0, red.zeta)
 
-    with _Step("closed-loop validation"):
+    with rp.step("closed-loop validation"):
         spec = validate.Specification()
         ref = validate.validation_profile(plant, hold=1.5 if quick else 2.5)
         v_p = validate.validate(plant, p_ctrl, spec=spec, reference=ref, label="P (paper 000)",
@@ -289,7 +260,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                       "its limits, chamber pressures with supply and atmosphere"),
         ]))
 
-    with _Step("stability map"):
+    with rp.step("stability map"):
         n = 40 if quick else 100
         smap = maps.stability_map(plant, maps.Axis.linspace("k0", 1.0, 90.0, n),
                                   maps.Axis.linspace("load.mass", 0.3, 5.0, n),
@@ -324,7 +295,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             *[rp.Paragraph("Note: " + nt) for nt in smap.notes],
         ]))
 
-    with _Step("ARX (Table I) vs PCT"):
+    with rp.step("ARX (Table I) vs PCT"):
         arx_poles = np.roots(ARX_A)
         pct_poles = stability.pct_closed_loop_poles(TABLE_II["w0"], TABLE_II["zeta"], T, TABLE_II["K0"])
         zoh_poles = stability.closed_loop_poles(TABLE_II["w0"], TABLE_II["zeta"], T, TABLE_II["K0"])
@@ -366,7 +337,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         ]))
 
     # ---- verdict and report
-    with _Step("write report"):
+    with rp.step("write report"):
         design_ok = v_pd.passed and all(checks) and rho_pd < 1
         failed = [c.name for c in v_pd.failed]
         msg = (f"PD design meets its specification on the nonlinear plant (K0 = {k0_pd:.1f} 1/s, "
