@@ -27,3 +27,15 @@ class InputError(WorkbenchError, ValueError):
                 prefix += f", {location}"
             prefix += ": "
         super().__init__(prefix + message)
+
+
+def positive(name: str, value, unit: str) -> float:
+    """``value`` as a finite float > 0, else an :class:`InputError` naming it and its unit."""
+    import math
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number in {unit}, got {value!r}") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise InputError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
+    return v

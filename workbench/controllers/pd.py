@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..errors import InputError
+from ..errors import InputError, positive
 
 __all__ = ["PID", "from_plant", "slow_time_constant", "pd_zero_on_slow_pole",
            "pd_zero_on_slow_pole_at"]
@@ -91,14 +91,6 @@ def from_plant(plant) -> PID:
 
 
 # ---------------------------------------------------------------------- PD placement (paper 000)
-def _finite_positive(name: str, value, unit: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number in {unit}, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0.0:
-        raise InputError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
-    return v
 
 
 def slow_time_constant(w0: float, zeta: float) -> float:
@@ -121,7 +113,7 @@ def slow_time_constant(w0: float, zeta: float) -> float:
         zeta <= 1 (complex or double poles: no single slow real pole to cancel), or a
         non-positive / non-finite w0.
     """
-    w0 = _finite_positive("w0", w0, "rad/s")
+    w0 = positive("w0", w0, "rad/s")
     try:
         z = float(zeta)
     except (TypeError, ValueError):
@@ -178,8 +170,8 @@ def pd_zero_on_slow_pole(w0: float, zeta: float, kp: float, sample_time: float,
     0.0473
     """
     tau = slow_time_constant(w0, zeta)
-    kp = _finite_positive("kp", kp, "V/m")
-    return PID(kp=kp, sample_time=_finite_positive("sample_time", sample_time, "s"),
+    kp = positive("kp", kp, "V/m")
+    return PID(kp=kp, sample_time=positive("sample_time", sample_time, "s"),
                kd=kp * tau, u_center=u_center, u_min=u_min, u_max=u_max)
 
 
@@ -222,7 +214,7 @@ def pd_zero_on_slow_pole_at(plant, x: float, kp: float | None = None,
         sample_time = prm["controller.sample_time"]
     red = linearize.reduced_position_model(linearize.tangent(plant, x=x))
     if k0 is not None:
-        kp = _finite_positive("k0", k0, "1/s") / red.kv
+        kp = positive("k0", k0, "1/s") / red.kv
     elif kp is None:
         if not prm.has_controller:
             raise InputError("give kp (V/m) or k0 (1/s): the plant file has no "

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 from scipy import linalg, optimize
 
-from ..errors import InputError, WorkbenchError
+from ..errors import InputError, WorkbenchError, positive
 
 __all__ = [
     "GainLimits", "gain_limits", "limits_from_plant", "sampled_gain_limit",
@@ -55,23 +55,15 @@ _GRID = 4097
 
 
 # ---------------------------------------------------------------------- input checks
-def _positive(name: str, value: Any, unit: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number in {unit}, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0.0:
-        raise InputError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
-    return v
 
 
 def _check_model(w0: Any, zeta: Any, sample_time: Any) -> tuple[float, float, float]:
-    return (_positive("w0", w0, "rad/s"), _positive("zeta", zeta, "(damping ratio)"),
-            _positive("sample_time", sample_time, "s"))
+    return (positive("w0", w0, "rad/s"), positive("zeta", zeta, "(damping ratio)"),
+            positive("sample_time", sample_time, "s"))
 
 
 def _check_k0(k0: Any) -> float | None:
-    return None if k0 is None else _positive("k0 (loop gain kp Kv)", k0, "1/s")
+    return None if k0 is None else positive("k0 (loop gain kp Kv)", k0, "1/s")
 
 
 # ---------------------------------------------------------------------- analytic limits
@@ -85,19 +77,19 @@ def pct_time_constant(w0: float, T: float) -> float:
     T : float
         Sample time, s (the sampler + ZOH is approximated by a lag of T/2).
     """
-    w0 = _positive("w0", w0, "rad/s")
-    T = _positive("sample_time", T, "s")
+    w0 = positive("w0", w0, "rad/s")
+    T = positive("sample_time", T, "s")
     return T / 2.0 + 1.0 / w0
 
 
 def continuous_limit(w0: float, zeta: float) -> float:
     """Hurwitz limit of the unsampled loop, K0 < 2 zeta w0, 1/s."""
-    return 2.0 * _positive("zeta", zeta, "(damping ratio)") * _positive("w0", w0, "rad/s")
+    return 2.0 * positive("zeta", zeta, "(damping ratio)") * positive("w0", w0, "rad/s")
 
 
 def pct_limit(w0: float, zeta: float, sample_time: float) -> float:
     """Hurwitz limit of the PCT system, K0 < 2 zeta / Ts with Ts = T/2 + 1/w0, 1/s."""
-    return 2.0 * _positive("zeta", zeta, "(damping ratio)") / pct_time_constant(w0, sample_time)
+    return 2.0 * positive("zeta", zeta, "(damping ratio)") / pct_time_constant(w0, sample_time)
 
 
 # ---------------------------------------------------------------------- discrete loop
@@ -522,7 +514,7 @@ def gain_limits(w0: float, zeta: float, sample_time: float, k0: float | None = N
     """
     w0, zeta, T = _check_model(w0, zeta, sample_time)
     k0 = _check_k0(k0)
-    kv = None if kv is None else _positive("kv", kv, "m/(V s)")
+    kv = None if kv is None else positive("kv", kv, "m/(V s)")
     num, dd = zoh_position_loop(w0, zeta, T)
     s_lim, s_th = _sampled_limit_and_theta(num, dd)
     d_lim, d_th = _sampled_limit_and_theta(num, np.append(dd, 0.0))
@@ -592,5 +584,5 @@ def limits_from_plant(plant, x: float, sample_time: float | None = None,
         if kp is None and has_ctrl:
             kp = prm["controller.kp"]
         if kp is not None:
-            k0 = _positive("kp", kp, "V/m") * red.kv
+            k0 = positive("kp", kp, "V/m") * red.kv
     return gain_limits(red.w0, red.zeta, sample_time, k0=k0, kv=red.kv)
