@@ -454,3 +454,63 @@ def tank_steps_figure(tests: Any, path: str | os.PathLike | None = None, title: 
 
 __all__ += ["valve_curves_figure", "valve_error_figure", "pressure_gain_figure",
             "tank_steps_figure"]
+
+
+# ---------------------------------------------------------------------- grey-box
+def greybox_figure(recordings: Any, result: Any, path: str | os.PathLike | None = None,
+                   title: str = ""):
+    """Recording vs nominal model vs estimated model, for each compared signal.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        The recordings the grey-box fit used, in the same order.
+    result : GreyBoxResult
+        From :func:`workbench.identify.grey_box.estimate` (uses its CVODES replays
+        ``trajectories_before`` / ``trajectories_after`` and the fits).
+    path : str or path-like, optional
+        Where to save; without it the figure is returned.
+    title : str, optional
+        Figure title.
+    """
+    recs = list(recordings)
+    scale = {"x": (1e3, "position x [mm]"), "v": (1.0, "velocity v [m/s]"),
+             "p_a": (1e-5, "p_a [bar abs]"), "p_b": (1e-5, "p_b [bar abs]"),
+             "p_s": (1e-5, "p_s [bar abs]"), "u": (1.0, "command u [V]")}
+    sigs = [s for s in ("x", "v", "p_a", "p_b", "p_s")
+            if any(s in fa for fa in result.fit_after)]
+    rows = sigs + ["u"]
+    ncol = len(recs)
+    fig, axes = plt.subplots(len(rows), ncol, sharex="col", squeeze=False,
+                             figsize=(8.0 * ncol + 0.6, 2.0 * len(rows) + 1.0),
+                             constrained_layout=True)
+    fig.suptitle(title or "Grey-box estimation: recording, nominal and estimated model",
+                 fontsize=11)
+    for c, rec in enumerate(recs):
+        before = result.trajectories_before[c] if c < len(result.trajectories_before) else None
+        after = result.trajectories_after[c] if c < len(result.trajectories_after) else None
+        fb = result.fit_before[c] if c < len(result.fit_before) else {}
+        fa = result.fit_after[c] if c < len(result.fit_after) else {}
+        for r, s in enumerate(rows):
+            ax = axes[r, c]
+            k, lab = scale[s]
+            if s == "u":
+                ax.step(rec.t, rec["u"], where="post", color="0.3", lw=0.9)
+            elif s in rec:
+                ax.plot(rec.t, rec[s] * k, color="0.35", lw=1.3, label="recording")
+                if before is not None:
+                    ax.plot(before.time, before[s] * k, color="tab:blue", lw=0.9, ls="--",
+                            label=f"nominal ({fb.get(s, float('nan')):.1f} %)")
+                if after is not None:
+                    ax.plot(after.time, after[s] * k, color="tab:red", lw=0.9,
+                            label=f"estimated ({fa.get(s, float('nan')):.1f} %)")
+                ax.legend(loc="best", fontsize=7)
+            ax.set_ylabel(lab)
+            ax.grid(True, alpha=0.3)
+        axes[0, c].set_title(result.sources[c] if c < len(result.sources) else f"recording {c + 1}",
+                             fontsize=9)
+        axes[-1, c].set_xlabel("time t [s]")
+    return _finish(fig, path)
+
+
+__all__ += ["greybox_figure"]

@@ -1,0 +1,320 @@
+"""Grey-box estimation (workbench.identify.grey_box): round trips on recordings simulated
+by the workbench, the wrong-structure verdict, exact sensitivities, and bad input.
+
+Data: the 25 mm reference rig with leakage to atmosphere (5e-10 m^3/(s Pa)), 2 s at
+1 kHz of random command doublets around the valve centre, simulated open loop by
+``simulate.open_loop`` (CVODES at rtol 1e-9); measurement noise 10 um on x and 200 Pa
+on the pressures (a good rig: a 16-bit reading of a 0.5 m encoder, 0.05 % of a 4 bar
+pressure transducer). All estimations use the same four parameters on the same plant
+structure, so the compiled step functions are shared (and cached between runs).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from workbench import Plant
+from workbench.errors import InputError
+from workbench.identify import grey_box as gb
+from workbench.recording import Recording
+
+from conftest import PLANTS
+
+TRUTH = {"load.mass": 1.2, "load.viscous_friction": 40.0,
+         "valve.sonic_conductance": 6.25e-8, "leakage.conductance_to_atmosphere": 5e-10}
+#: Start values off by 30 to 50 %.
+START = {"load.mass": 1.56, "load.viscous_friction": 28.0,
+         "valve.sonic_conductance": 7.5e-8, "leakage.conductance_to_atmosphere": 7.5e-10}
+NOISE = {"x": 1e-5, "p_a": 200.0, "p_b": 200.0}
+NAMES = list(TRUTH)
+
+
+@pytest.fixture(scope="module")
+def truth_plant() -> Plant:
+    return Plant.from_toml(PLANTS / "rig25_mpye.toml").with_params(**TRUTH)
+
+
+@pytest.fixture(scope="module")
+def start_plant(truth_plant) -> Plant:
+    return truth_plant.with_params(**START)
+
+
+@pytest.fixture(scope="module")
+def noisy(truth_plant) -> Recording:
+    return gb.synthetic_recording(truth_plant, 2.0, 1e-3, seed=3, noise=NOISE)
+
+
+@pytest.fixture(scope="module")
+def clean(truth_plant) -> Recording:
+    return gb.synthetic_recording(truth_plant, 2.0, 1e-3, seed=4)
+
+
+@pytest.fixture(scope="module")
+def noisy_result(start_plant, noisy):
+    return gb.estimate(start_plant, [noisy], NAMES)
+
+
+def test_noisy_estimates_within_confidence_intervals(noisy_result):
+    res = noisy_result
+    assert res.success, res.status
+    truth = np.array([TRUTH[n] for n in res.names])
+    # 3 standard deviations (99.7 %): with four parameters a 95 % interval misses one of
+    # them in about 1 run in 5, too often for a test. The stds are honest: over 16 seeds
+    # (1.5 s recordings) the spread of (estimate - truth) / std was 0.8 .. 1.04.
+    z = (res.values_ - truth) / res.std_
+    assert np.all(np.abs(z) < 3.0), dict(zip(res.names, z))
+    # and the intervals are informative: every parameter to better than 1 % (1 sigma)
+    assert np.all(res.std_ / truth < 1e-2), dict(zip(res.names, res.std_ / truth))
+    assert np.all(res.identifiable_) and not np.any(res.at_bound_)
+    assert not res.poor_fit, res.message
+    # 95 % intervals are value +- 1.96 std
+    np.testing.assert_allclose(res.ci95_[:, 1] - res.values_, 1.959964 * res.std_, rtol=1e-5)
+    # correlation matrix: symmetric, unit diagonal, entries in [-1, 1]
+    c = res.correlation_
+    np.testing.assert_allclose(c, c.T, atol=1e-12)
+    np.testing.assert_allclose(np.diag(c), 1.0)
+    assert np.all(np.abs(c) <= 1.0 + 1e-9)
+
+
+def test_noisy_fit_before_after_and_noise(noisy_result):
+    res = noisy_result
+    fb, fa = res.fit_before[0], res.fit_after[0]
+    assert set(fa) == {"x", "p_a", "p_b"}
+    # the start values are 30-50 % off: the nominal replay is poor; the estimated plant,
+    # replayed by CVODES from the estimated initial state, follows x to the noise
+    # (10 um on a ~40 mm swing) and the pressures to 200 Pa on a ~30 kPa swing
+    assert fb["x"] < 80.0 and fb["p_a"] < 50.0
+    assert fa["x"] > 99.5 and fa["p_a"] > 98.0 and fa["p_b"] > 98.0
+    # noise estimated from the data (third differences) within 10 % of the truth
+    for s, sd in NOISE.items():
+        assert res.noise[0][s] == pytest.approx(sd, rel=0.1)
+        # residuals of the estimated model at the noise level (within 10 %)
+        assert res.residual_rms_[0][s] == pytest.approx(sd, rel=0.1)
+    # white residuals: about 1 % of the lags outside the 99 % band, allow 20 %
+    assert all(v <= 0.2 for v in res.whiteness_[0].values())
+    # cost 0.5 sum(r^2)/n with r normalised by the noise: about 0.5
+    assert 0.4 < res.cost < 0.6
+
+
+def test_noisy_result_plant_and_report(noisy_result):
+    res = noisy_result
+    for n in res.names:
+        assert res.plant_.params[n] == pytest.approx(res.value(n), rel=1e-12)
+    d = json.loads(json.dumps(res.as_dict()))
+    assert set(d["parameters"]) == set(NAMES)
+    assert d["parameters"]["load.mass"]["unit"] == "kg"
+    assert d["poor_fit"] is False and d["success"] is True
+    assert len(d["fit_after"]) == 1 and "x" in d["fit_after"][0]
+    text = res.table()
+    assert "load.mass" in text and "95 % interval" in text and "->" in text
+
+
+def test_noise_free_recovers_parameters(start_plant, clean):
+    res = gb.estimate(start_plant, [clean], NAMES)
+    assert res.success, res.status
+    rel = np.abs(res.values_ / np.array([TRUTH[n] for n in res.names]) - 1.0)
+    # Only integration error is left: the data come from CVODES at rtol 1e-9, the fit
+    # uses 2-stage Radau IIA at 1 ms, which is within ~1e-6 of full scale of it; the
+    # parameters come back to about 1e-6 (1e-4 allows for other plants and machines).
+    assert np.all(rel < 1e-4), dict(zip(res.names, rel))
+    # fixed-step model vs CVODES with the same parameters and initial state:
+    # well below any sensor noise (1 um, 5 Pa)
+    err = res.integration_error_[0]
+    assert err["x"] < 1e-6 and err["p_a"] < 5.0 and err["p_b"] < 5.0
+    assert res.fit_after[0]["x"] > 99.99
+
+
+def test_wrong_structure_is_reported_as_poor_fit(truth_plant, start_plant):
+    # data from a rig with dry friction (Karnopp stick-slip), model without it
+    rig = truth_plant.with_params(**{"friction.coulomb": 15.0, "friction.static": 20.0,
+                                     "friction.stribeck_velocity": 0.01})
+    rec = gb.synthetic_recording(rig, 1.5, 1e-3, seed=5, noise=NOISE)
+    res = gb.estimate(start_plant, [rec], NAMES, max_iter=30)
+    assert res.poor_fit
+    assert "model" in res.message
+    # the verdict has numbers behind it: residuals far above the noise and correlated
+    assert res.residual_rms_[0]["x"] > 3.0 * res.noise[0]["x"]
+    assert min(res.fit_after[0].values()) < 99.0
+
+
+def test_step_sensitivities_match_finite_differences(start_plant):
+    # the exact (implicit-function) sensitivities of one Radau step against central
+    # differences of the same compiled step; steps scaled to each variable's size
+    plant = start_plant
+    out_idx = [plant.output_index(s) for s in ("x", "p_a", "p_b")]
+    step, sens = gb._step_functions(plant, len(NAMES), out_idx, 2, 3)
+    idx = [plant.param_index(n) for n in NAMES]
+    E = np.zeros((len(plant.p0), len(NAMES)))
+    E[idx, range(len(NAMES))] = 1.0
+    X = np.array([0.21, 0.35, 3.9e5, 2.8e5])
+    u, h, p = 5.12, 1e-3, plant.p0
+    S0 = np.hstack([np.eye(4), np.zeros((4, len(NAMES)))])
+    Xn, Sn, y, dy = (np.asarray(a) for a in sens(X, S0, u, h, p, E))
+    np.testing.assert_allclose(Xn.ravel(), np.asarray(step(X, u, h, p)[0]).ravel(), rtol=1e-12)
+    def nxt(x, pv):
+        return np.asarray(step(x, u, h, pv)[0]).ravel()
+
+    fd = np.zeros_like(Sn)
+    for j, sc in enumerate([1e-6, 1e-6, 1.0, 1.0]):
+        dx = np.zeros(4)
+        dx[j] = sc
+        fd[:, j] = (nxt(X + dx, p) - nxt(X - dx, p)) / (2 * sc)
+    for k, i in enumerate(idx):
+        dp = np.zeros_like(p)
+        dp[i] = 1e-6 * p[i]
+        fd[:, 4 + k] = (nxt(X, p + dp) - nxt(X, p - dp)) / (2 * dp[i])
+    scale = np.array([0.5, 1.0, 1e5, 1e5])
+    colscale = np.concatenate([scale, [TRUTH[n] for n in NAMES]])
+    rel = np.abs(Sn - fd) * colscale[None, :] / scale[:, None]
+    # central differences are good to ~1e-7 of full scale here; the sensitivities of the
+    # converged stage equations agree with those of 3 Newton iterations to about the same
+    assert rel.max() < 1e-5, rel
+
+
+def test_bad_inputs_raise_input_error(start_plant, noisy):
+    cases = [
+        (dict(parameters=["load.mas"]), "did you mean 'load.mass'"),
+        (dict(parameters=["friction.coulomb"]), "dry_friction"),
+        (dict(parameters=["valve.command_min"]), "not a physical parameter"),
+        (dict(parameters=[]), "no parameters"),
+        (dict(parameters=["load.mass", "load.mass"]), "twice"),
+        (dict(parameters=["load.mass"], bounds={"load.mass": (2.0, 1.0)}), "low < high"),
+        (dict(parameters=["load.mass"], bounds={"load.mass": (-1.0, 2.0)}), "admissible"),
+        (dict(parameters=["load.mass"], bounds={"supply.pressure": (1e5, 2e5)}),
+         "not among the parameters"),
+        (dict(parameters=["load.mass"], signals=("x", "q")), "cannot compare signal 'q'"),
+        (dict(parameters=["load.mass"], x0="measured"), "x0 must be"),
+        (dict(parameters=["load.mass"], method="ekf"), "method must be"),
+        (dict(parameters=["load.mass"], shooting_interval=0.0), "shooting_interval"),
+        (dict(parameters=["load.mass"], substeps=0), "substeps"),
+        (dict(parameters=["load.mass"], noise={"x": -1.0}), "noise level"),
+    ]
+    for kw, text in cases:
+        with pytest.raises(InputError, match=text.replace("(", r"\(")):
+            gb.estimate(start_plant, [noisy], **kw)
+    short = Recording.from_arrays(noisy.t[:10], u=noisy["u"][:10], x=noisy["x"][:10])
+    with pytest.raises(InputError, match="10 samples"):
+        gb.estimate(start_plant, [short], ["load.mass"])
+    only_x = Recording.from_arrays(noisy.t, u=noisy["u"], x=noisy["x"])
+    with pytest.raises(InputError, match="none of the signals"):
+        gb.estimate(start_plant, [only_x], ["load.mass"], signals=("p_a", "p_b"))
+    with pytest.raises(InputError, match="no recording"):
+        gb.estimate(start_plant, [], ["load.mass"])
+
+
+def test_cli_writes_estimates_plant_and_figure(tmp_path, start_plant, noisy, capsys):
+    from workbench.__main__ import main
+    plant_file = tmp_path / "plant.toml"
+    start_plant.to_toml(plant_file)
+    rec_file = tmp_path / "run.csv"
+    noisy.to_csv(rec_file)
+    out = tmp_path / "fit"
+    code = main(["identify", "greybox", str(plant_file), str(rec_file), "--params", *NAMES,
+                 "--bounds", "load.mass=0.5:5", "--out", str(out), "--json"])
+    assert code == 0
+    printed = json.loads(capsys.readouterr().out)
+    saved = json.loads((out / "estimates.json").read_text())
+    assert printed["parameters"]["load.mass"]["value"] == saved["parameters"]["load.mass"]["value"]
+    assert saved["parameters"]["load.mass"]["bounds"] == [0.5, 5.0]
+    assert (out / "fit.png").stat().st_size > 10_000
+    est = Plant.from_toml(out / "plant_estimated.toml")
+    assert est.params["load.mass"] == pytest.approx(saved["parameters"]["load.mass"]["value"])
+    assert est.params["load.mass"] == pytest.approx(TRUTH["load.mass"], rel=1e-2)
+    # a bad parameter name is one readable line, exit code 2
+    code = main(["identify", "greybox", str(plant_file), str(rec_file), "--params", "load.mas"])
+    assert code == 2
+    assert "did you mean 'load.mass'" in capsys.readouterr().err
+
+
+def test_bounds_parser():
+    assert gb._parse_bounds(["load.mass=0.5:5", "valve.null_offset=-0.2:0.2"]) == {
+        "load.mass": (0.5, 5.0), "valve.null_offset": (-0.2, 0.2)}
+    with pytest.raises(InputError, match="NAME=LOW:HIGH"):
+        gb._parse_bounds(["load.mass=0.5"])
+
+
+def test_noise_estimate_is_model_free():
+    # third differences remove a smooth signal: a slow sine plus white noise of 0.01
+    rng = np.random.default_rng(0)
+    t = np.arange(20000) * 1e-3
+    y = 0.1 * np.sin(2 * math.pi * 0.5 * t) + 0.01 * rng.standard_normal(t.size)
+    assert gb.noise_std(y) == pytest.approx(0.01, rel=0.05)   # 20000 samples: ~1 % spread
+    assert gb.noise_std(np.sin(t)) < 1e-8                       # noise-free: ~ x''' h^3
+
+
+@pytest.mark.slow
+def test_dry_friction_estimated_in_smooth_form(truth_plant):
+    # Coulomb friction among the parameters: the estimator always uses the smooth
+    # friction form; the data here are simulated in that form too, so the round trip is
+    # exact (a stick-slip rig differs from it by model form, not by parameters).
+    rig = truth_plant.with_params(**{"friction.coulomb": 15.0, "friction.static": 20.0,
+                                     "friction.stribeck_velocity": 0.01}).with_friction("smooth")
+    rec = gb.synthetic_recording(rig, 1.5, 1e-3, seed=6, noise=NOISE)
+    start = rig.with_params(**{"friction.coulomb": 10.0, "load.mass": 1.5})
+    res = gb.estimate(start, [rec], ["load.mass", "load.viscous_friction", "friction.coulomb"])
+    assert res.success and res.method["substeps"] == 8 and res.method["friction_form"] == "smooth"
+    truth = np.array([1.2, 40.0, 15.0])
+    assert np.all(np.abs(res.values_ - truth) < 3.0 * res.std_), (res.values_, res.std_)
+
+
+def test_closed_loop_recording_with_quantisation(truth_plant, start_plant):
+    # The use of the mismatch diagnosis: a PD loop at 10 ms (the plant file's controller),
+    # 12-bit readings of x (0.5 m range) and of the pressures (10 bar range) on top of the
+    # noise. The fit replays the recorded u; the before/after check replays the loop on r.
+    from workbench import controllers, simulate
+    rng = np.random.default_rng(1)
+    ref = simulate.steps(list(rng.uniform(0.1, 0.4, 6)), hold=0.5)
+    t = np.arange(3001) * 1e-3
+    run = simulate.closed_loop(truth_plant, controllers.from_plant(truth_plant), ref, t_end=3.0,
+                               x0=0.25, output_times=t, progress=False)
+    qx, qp = 0.5 / 4096, 1e6 / 4096
+    rec = Recording.from_arrays(
+        t, u=run["u"], r=run.reference,
+        x=np.round((run["x"] + NOISE["x"] * rng.standard_normal(t.size)) / qx) * qx,
+        p_a=np.round((run["p_a"] + NOISE["p_a"] * rng.standard_normal(t.size)) / qp) * qp,
+        p_b=np.round((run["p_b"] + NOISE["p_b"] * rng.standard_normal(t.size)) / qp) * qp)
+    res = gb.estimate(start_plant, [rec], NAMES)
+    assert res.success and not res.poor_fit, res.message
+    assert res.method["replay"] == ["closed_loop"]
+    truth = np.array([TRUTH[n] for n in res.names])
+    z = (res.values_ - truth) / res.std_
+    # 4 sigma here: quantisation error is neither Gaussian nor white (it is constant while
+    # the piston rests), which the covariance does not model; over 4 seeds |z| < 3
+    assert np.all(np.abs(z) < 4.0), dict(zip(res.names, z))
+    assert res.fit_after[0]["x"] > 99.5 and res.fit_ms_[0]["x"] > 99.5
+    # the residuals sit at the quantisation + noise level: sqrt(q^2/12 + sd^2) = 37 um
+    assert res.residual_rms_[0]["x"] == pytest.approx(math.sqrt(qx ** 2 / 12 + 1e-10), rel=0.15)
+
+
+def test_replay_is_open_loop_simulation(truth_plant, noisy):
+    # The before/after check steps CVODES once per run of equal commands; it is the
+    # integrator of simulate.open_loop (per sample). Both at their default tolerances
+    # (rtol 1e-7): they agree to about 1e-5 of full scale; 1 um and 10 Pa allow 10x that.
+    from workbench import simulate
+    t, u = noisy.t[:800], noisy["u"][:800]
+    x0 = truth_plant.initial_state(0.25, p_a=3.5e5, p_b=3.5e5, u0=5.0)
+    ref = simulate.open_loop(truth_plant, t, u, x0=x0, progress=False)
+    mine = gb._replay(truth_plant, t, u, x0)
+    assert np.max(np.abs(mine["x"] - ref["x"])) < 1e-6
+    assert np.max(np.abs(mine["p_a"] - ref["p_a"])) < 10.0
+    assert np.max(np.abs(mine["p_b"] - ref["p_b"])) < 10.0
+
+
+def test_two_recordings_and_measured_initial_state(truth_plant, start_plant, noisy):
+    other = gb.synthetic_recording(truth_plant, 1.0, 1e-3, seed=7, noise=NOISE, x0=0.3)
+    res = gb.estimate(start_plant, [noisy, other], NAMES, x0="from_recording")
+    assert res.success, res.status
+    assert len(res.fit_after) == 2 and len(res.x0_) == 2
+    # measured components of the initial state are fixed to a line through the first
+    # 11 samples: within a few noise levels of the first sample
+    for rec, x0 in zip((noisy, other), res.x0_):
+        assert abs(x0[0] - rec["x"][0]) < 5 * NOISE["x"]
+        assert abs(x0[2] - rec["p_a"][0]) < 5 * NOISE["p_a"]
+    truth = np.array([TRUTH[n] for n in res.names])
+    # fixing noisy initial values biases an open-loop replay a little (documented):
+    # check 1 % instead of the confidence intervals
+    assert np.all(np.abs(res.values_ / truth - 1.0) < 1e-2)
