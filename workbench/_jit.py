@@ -45,12 +45,11 @@ def compiled(fun: ca.Function, flags: tuple[str, ...] = ("-O2",)) -> ca.Function
         return fun
     with tempfile.TemporaryDirectory(prefix="wb_jit_") as tmp:
         src_name = f"{fun.name()}.c"
-        cwd = os.getcwd()
-        try:
-            os.chdir(tmp)
-            fun.generate(src_name, {"with_header": False})
-        finally:
-            os.chdir(cwd)
+        # CodeGenerator writes under a path prefix: no chdir, so threads may compile
+        # at the same time
+        gen = ca.CodeGenerator(src_name, {"with_header": False})
+        gen.add(fun)
+        gen.generate(tmp + os.sep)
         source = Path(tmp, src_name).read_bytes()
         digest = hashlib.sha256(source + " ".join(flags).encode()
                                 + ca.__version__.encode()).hexdigest()[:20]
