@@ -8,3 +8,20 @@ forgetting), :mod:`.valve_fit` (paper 003's valve characteristic approximations)
 Each module that has a command line part exposes ``add_cli(subparsers)``, which adds
 its ``workbench identify NAME`` sub-command.
 """
+
+from .arx import ArxModel, ArxValidation, OrderSelection, fit_arx, select_order
+from .arx import validate as validate_arx
+from .excitation import aprbs, as_reference, prbs
+from .grey_box import GreyBoxResult, estimate
+from .rls import ForgettingChoice, RlsResult, choose_forgetting, rls
+from .valve_fit import (AffineTableFit, PolynomialValveFit, ValveTable, fit_affine,
+                        fit_polynomial, generate_valve_table, load_valve_table, select_degrees)
+
+__all__ = [
+    "ArxModel", "ArxValidation", "OrderSelection", "fit_arx", "select_order", "validate_arx",
+    "prbs", "aprbs", "as_reference",
+    "RlsResult", "ForgettingChoice", "rls", "choose_forgetting",
+    "ValveTable", "PolynomialValveFit", "AffineTableFit", "load_valve_table",
+    "generate_valve_table", "fit_polynomial", "fit_affine", "select_degrees",
+    "GreyBoxResult", "estimate",
+]
