@@ -74,38 +74,10 @@ def main(argv=None) -> int:
                          "(no compiler needed; slower solve times)")
     args = ap.parse_args(argv)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    done: list = []
-    try:
-        return _design(args, out, done, t_start)
-    except Exception as exc:   # noqa: BLE001 - any failure must still leave a report
-        step = getattr(exc, "design_step", "start")
-        rp.write_failure(out, TITLE, exc, step=step, partial_sections=done,
-                         provenance=rp.provenance(plant_file=PLANT,
-                                                  command_line=" ".join(sys.argv)))
-        print(f"design FAILED at step '{step}': {exc}\n  report: {out / 'report.html'}",
-              file=sys.stderr)
-        return 1
+    return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 
 
-class _Step:
-    """Context manager that tags an exception with the design step it came from."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        print(f"[{time.strftime('%H:%M:%S')}] {name} ...", flush=True)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, etype, exc, tb):
-        if exc is not None and not hasattr(exc, "design_step"):
-            try:
-                exc.design_step = self.name
-            except AttributeError:
-                pass
-        return False
 
 
 #: s after each step of the reference from which the error counts as "settled".
@@ -155,7 +127,7 @@ def run_metrics(v: validate.Validation, plant: Plant) -> dict:
 
 def _design(args, out: Path, done: list, t_start: float) -> int:
     quick = args.quick
-    with _Step("plants"):
+    with rp.step("plants"):
         nominal = Plant.from_toml(PLANT)
         plant = nominal.with_params(**UNMODELLED)
         model = prediction_model(plant, effects=())
@@ -193,7 +165,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             ]),
         ]))
 
-    with _Step("NMPC"):
+    with rp.step("NMPC"):
         nmpc = NMPC(model, sample_time=prm["controller.sample_time"], max_speed=MAX_SPEED,
                     jit=args.jit)
         rec = Recorder(nmpc)
@@ -203,7 +175,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         solve_ms = np.array(rec.times) * 1e3
         infos = [i for i in rec.infos if i is not None]
 
-    with _Step("PD tuning"):
+    with rp.step("PD tuning"):
         kps = PD_KP[-1:] if quick else PD_KP
         kds = PD_KD[-1:] if quick else PD_KD
         grid = []
@@ -254,7 +226,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                      caption="PD gain grid on the validation plant"),
         ]))
 
-    with _Step("comparison"):
+    with rp.step("comparison"):
         m_n, m_p = run_metrics(v_n, plant), run_metrics(v_p, plant)
         v_n.trajectory.to_csv(out / "validation_nmpc.csv",
                               columns=("t", "u", "x", "v", "p_a", "p_b", "q_supply", "r"))
@@ -311,7 +283,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                       "limits, chamber pressures with supply and atmosphere"),
         ]))
 
-    with _Step("constraint test"):
+    with rp.step("constraint test"):
         # steps beyond both ends of the stroke and across it at full speed
         levels = ([1.2 * L, -0.2 * L] if quick else
                   [1.2 * L, -0.2 * L, 0.98 * L, 0.02 * L, 0.9 * L, 0.1 * L])
@@ -321,7 +293,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                                    output_times=np.arange(0.0, lim_ref.duration + 1e-9, 1e-3),
                                    progress=None)
 
-    with _Step("constraints and solve time"):
+    with rp.step("constraints and solve time"):
         p_atm, p_sup = prm["gas.atmospheric_pressure"], prm["supply.pressure"]
         u_lo, u_hi = prm["valve.command_min"], prm["valve.command_max"]
         tol_p = 0.2e5
@@ -391,7 +363,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                            "including Python overhead)"),
         ]))
 
-    with _Step("write report"):
+    with rp.step("write report"):
         design_ok = bool(v_n.passed and beats_iae and cons_ok)
         factor = m_p["iae"] / m_n["iae"]
         msg = (f"NMPC passes validation on the plant with friction and lines and beats the tuned PD: "

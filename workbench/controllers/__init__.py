@@ -7,6 +7,7 @@ from .feedback_linearizing import (SAMPLING_LIMIT, FeedbackLinearizing, Feasibil
 from .force import (PLAN_RULES, DriveModel, ForceTracker, PressurePlan, force_tracker,
                     motion_force, pressure_plan, smooth_profile)
 from .inversion import CommandMap, FlowCommand, ValveInversion
+from .mpc import NMPC, Recorder, prediction_model
 from .pd import (PID, from_plant, pd_zero_on_slow_pole, pd_zero_on_slow_pole_at,
                  slow_time_constant)
 
@@ -16,4 +17,4 @@ __all__ = ["DiscreteController", "PID", "from_plant", "pd_zero_on_slow_pole",
            "DriveModel", "PressurePlan", "PLAN_RULES", "pressure_plan", "motion_force",
            "smooth_profile", "ForceTracker", "force_tracker",
            "FeedbackLinearizing", "Feasibility", "ReferenceModel", "feedback_linearizing",
-           "feasibility", "error_gains", "SAMPLING_LIMIT"]
+           "feasibility", "error_gains", "SAMPLING_LIMIT", "NMPC", "Recorder", "prediction_model"]
