@@ -1,0 +1,218 @@
+"""Mismatch diagnosis (issue 6): concealed effects are named, refitted and improve the fit.
+
+Each concealed case is a 20 s, 1 kHz closed-loop recording of the 25 mm rig (PD loop
+kp = 5 V/m, kd = 0.1 V s/m at 10 ms) with sensor noise and 12-bit quantisation on x
+and the pressures, made by :mod:`workbench.diagnose.synth` with the effect's values
+drawn (seeded) from realistic ranges. The diagnosis gets only the nominal plant file
+and the CSV. Recordings are made once per test session.
+
+Tolerances: the fitted value of the checked keys within 30 % of the concealed one
+(the issue's bound); "fit improves": the mean fit over the recorded signals rises and
+no signal loses more than 0.5 percentage points (a pressure-only effect may leave the
+position fit at 99.9 % unchanged within rounding).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.diagnose import synth
+
+DURATION = 20.0
+
+#: (concealed kind, seed). Seeds are fixed for reproducibility; the draws are the
+#: generator's (values printed on failure).
+CASES = [("none", 3), ("dry_friction", 3), ("valve_deadband", 3), ("valve_offset", 3),
+         ("valve_dynamics", 3), ("line_dynamics", 3), ("leakage", 3), ("supply_droop", 3),
+         ("heat_transfer", 3), ("mass_error", 3)]
+
+_CACHE: dict[tuple, tuple] = {}
+
+
+@pytest.fixture(scope="session")
+def diag_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("diagnose")
+
+
+def concealed(kind: str, seed: int, root: Path, duration: float = DURATION, **kw):
+    """(case, plant file, recording file), made once per session."""
+    key = (kind, seed, duration, tuple(sorted(kw.items())))
+    if key not in _CACHE:
+        case = synth.concealed_case(kind, seed=seed)
+        d = root / f"{kind}_{seed}_{int(duration)}_{len(_CACHE)}"
+        d.mkdir(parents=True, exist_ok=True)
+        rec = synth.record(case, seed=seed, duration=duration, **kw)
+        _CACHE[key] = (case, case.write_nominal(d / "plant.toml"), rec.to_csv(d / "recording.csv"),
+                       rec)
+    return _CACHE[key]
+
+
+def _fit_improved(before: dict, after: dict) -> bool:
+    mean_b = np.mean([before[k] for k in before])
+    mean_a = np.mean([after[k] for k in before])
+    return mean_a > mean_b and all(after[k] >= before[k] - 0.5 for k in before)
+
+
+@pytest.mark.parametrize("kind,seed", CASES, ids=[c[0] for c in CASES])
+def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
+    from workbench.diagnose import diagnose
+    case, plant_file, rec_file, _ = concealed(kind, seed, diag_dir)
+    d = diagnose(plant_file, rec_file)
+    res = d.to_json()
+    sc = synth.score(case, res)
+    info = f"concealed {case.values}; got {json.dumps(res['findings'])[:400]}"
+    assert sc["correct"], f"named {sc['named']} instead of {sc['expected']}: {info}"
+    if kind == "none":
+        assert res["findings"] == []
+        assert res["fit_after"] == res["fit_before"]
+        return
+    assert sc["checked_ok"], f"fitted values off by {sc['relative_errors']}: {info}"
+    assert _fit_improved(res["fit_before"], res["fit_after"]), \
+        f"fit before {res['fit_before']} after {res['fit_after']}"
+    f0 = res["findings"][0]
+    assert 0.0 < f0["confidence"] <= 1.0
+    assert f0["where"] and all(a <= b for a, b in f0["where"])
+    assert f0["fit_after"] == res["fit_after"] or len(res["findings"]) > 1
+
+
+def test_json_contract_and_files(diag_dir, tmp_path):
+    """diagnosis.json has exactly the keys of formats.md section 4; the augmented plant
+    file loads and has the effect; the CLI writes report.html."""
+    from workbench.__main__ import main
+    from workbench import Plant
+    case, plant_file, rec_file, _ = concealed("valve_offset", 5, diag_dir, duration=8.0)
+    out = tmp_path / "out"
+    rc = main(["diagnose", str(plant_file), str(rec_file), "--out", str(out), "--quiet"])
+    assert rc == 0
+    res = json.loads((out / "diagnosis.json").read_text())
+    assert list(res) == ["plant", "recording", "fit_before", "fit_after", "findings"]
+    assert set(res["fit_before"]) == {"x", "p_a", "p_b"}
+    assert res["findings"], "an offset of 0.1-0.3 V must be found even in 8 s"
+    f = res["findings"][0]
+    assert list(f) == ["effect", "confidence", "parameters", "where", "evidence", "fit_after"]
+    assert f["effect"] == "valve_offset" and list(f["parameters"]) == ["null_offset"]
+    aug = Plant.from_toml(out / "plant.augmented.toml")
+    assert "valve_offset" in aug.effects
+    assert aug.params["valve.null_offset"] == pytest.approx(f["parameters"]["null_offset"],
+                                                            rel=1e-5)
+    html = (out / "report.html").read_text()
+    assert "Candidates ranked by evidence" in html and "valve_offset" in html
+    assert (out / "report.pdf").stat().st_size > 10_000
+
+
+def test_position_only_recording_still_reveals_friction(diag_dir):
+    """Without pressures: a note says what is lost, and dry friction is still named."""
+    from workbench.diagnose import diagnose
+    case, _, _, rec = concealed("dry_friction", 4, diag_dir, duration=16.0)
+    pos_only = rec.__class__.from_arrays(rec.t, u=rec["u"], x=rec["x"], r=rec["r"],
+                                         metadata=dict(rec.metadata))
+    d = diagnose(case.nominal_plant, pos_only)
+    assert any("pressures" in n for n in d.notes)
+    assert list(d.fit_before) == ["x"]
+    assert d.findings and d.findings[0].effect == "dry_friction", d.summary()
+    assert d.findings[0].parameters["coulomb"] == pytest.approx(case.values["friction.coulomb"],
+                                                                rel=0.3)
+
+
+def test_too_short_recording_is_refused(diag_dir):
+    from workbench.diagnose import diagnose
+    from workbench.errors import InputError
+    case, _, _, rec = concealed("none", 6, diag_dir, duration=8.0)
+    n = 1500
+    short = rec.__class__.from_arrays(rec.t[:n], **{c: rec[c][:n] for c in rec.columns if c != "t"},
+                                      metadata=dict(rec.metadata))
+    with pytest.raises(InputError, match="too short"):
+        diagnose(case.nominal_plant, short)
+
+
+def test_reference_without_controller_replays_open_loop(diag_dir, tmp_path):
+    """r recorded but no [controller]: a clear note, open-loop re-anchored replay, and the
+    effect is still found from the recorded command."""
+    from workbench import Plant
+    from workbench.diagnose import diagnose
+    case, _, _, rec = concealed("valve_deadband", 7, diag_dir, duration=12.0)
+    plain = case.nominal.replace(**{k: None for k in case.nominal.values
+                                    if k.startswith("controller.")})
+    plant_file = tmp_path / "no_controller.toml"
+    plain.to_toml(plant_file)
+    d = diagnose(Plant.from_toml(plant_file), rec)
+    assert any("no [controller]" in n for n in d.notes)
+    assert "open loop" in d.mode
+    assert d.findings and d.findings[0].effect == "valve_deadband", d.summary()
+    assert d.findings[0].parameters["deadband"] == pytest.approx(case.values["valve.deadband"],
+                                                                 rel=0.3)
+
+
+def test_candidate_values_map_to_plant_keys():
+    from workbench.diagnose.candidates import candidates
+    params = synth.nominal_params()
+    cands = {c.name: c for c in candidates(params)}
+    fr = cands["dry_friction"]
+    pv = fr.plant_values({"friction.coulomb": 20.0, "friction.static_excess": 0.5,
+                          "friction.stribeck_velocity": 0.01})
+    assert pv == {"friction.coulomb": 20.0, "friction.static": 30.0,
+                  "friction.stribeck_velocity": 0.01}
+    assert fr.reported({"friction.coulomb": 20.0, "friction.static_excess": 0.5,
+                        "friction.stribeck_velocity": 0.01}) == \
+        {"coulomb": 20.0, "static": 30.0, "stribeck_velocity": 0.01}
+    m = cands["parameter_error:load.mass"]
+    assert m.reported({"load.mass": 3.0}) == {"load.mass": 3.0}
+    ln = cands["line_dynamics"]
+    assert set(ln.reported({"lines.length": 2.0, "lines.diameter": 4e-3})) == {"length", "diameter"}
+    # every effect of formats.md section 2 is a candidate
+    from workbench.params import EFFECT_NAMES
+    assert set(EFFECT_NAMES) <= {c.effect for c in cands.values()}
+    # transforms round-trip within the bounds
+    for c in cands.values():
+        z = c.z0()
+        vals = c.values(z)
+        assert np.allclose(c.z0(vals), z)
+
+
+def test_engine_matches_cvodes_open_loop():
+    """The fixed-step engine (ROS2, 1 ms) follows the CVODES reference on an open-loop
+    command sequence (moves both ways, stops) within 0.2 mm (more than the quantisation
+    step of the 12-bit position sensor, 0.12 mm) and 1 kPa (twice the pressure noise);
+    with dry friction too (its stick-slip stepping)."""
+    from workbench import Plant, simulate
+    from workbench.diagnose.engine import Engine, EngineInputs, INPUT_ROWS
+    base = synth.nominal_params()
+    for params in (base, base.replace(**{"friction.coulomb": 15.0, "friction.static": 22.0,
+                                         "friction.stribeck_velocity": 0.01})):
+        plant = Plant(params)
+        t = np.arange(1500) * 1e-3
+        u = np.where(t < 0.2, 5.0, np.where(t < 0.5, 5.25, np.where(t < 0.9, 4.8, 5.03)))
+        z0 = plant.initial_state(0.25)
+        ref = simulate.open_loop(plant, t, u, x0=z0, progress=False)
+        d = np.zeros((len(INPUT_ROWS), len(t)))
+        d[INPUT_ROWS.index("u_rec")] = u
+        y = Engine(plant, 1e-3, None).run(z0, EngineInputs(d), plant.p0)
+        assert np.ptp(ref["x"]) > 0.1                 # it did move
+        assert np.max(np.abs(y[0] - ref["x"])) < 2e-4
+        assert np.max(np.abs(y[1] - ref["p_a"])) < 1e3
+
+
+def test_intervals_and_regimes():
+    from workbench.diagnose.locate import intervals
+    t = np.arange(1000) * 0.01
+    s = np.zeros(1000)
+    s[100:150] = 5.0
+    s[155:160] = 5.0          # merged with the first (gap 0.05 s < 0.2 s)
+    s[600:700] = 3.0
+    iv = intervals(s, t, 1.0)
+    assert iv == [[1.0, 1.59], [6.0, 6.99]]
+    assert intervals(np.zeros(10), t[:10], 1.0) == []
+
+
+def test_quantised_noise_estimate():
+    from workbench.diagnose.data import _noise_std
+    rng = np.random.default_rng(0)
+    y = np.linspace(0.1, 0.3, 20000) + rng.normal(0, 20e-6, 20000)
+    lsb = 0.5 / 4096
+    yq = np.round(y / lsb) * lsb
+    # quantisation dominates: LSB/sqrt(12) = 35 um, combined with 20 um: ~40 um
+    assert 25e-6 < _noise_std(yq) < 50e-6

@@ -1,0 +1,34 @@
+"""Mismatch diagnosis: locate where simulation and recording differ, name the missing
+physics, model it and show the fit improve.
+
+The method is split into parts (one concept per module):
+
+* :mod:`.data` -- the recording checked, smoothed, differentiated; noise; replay mode;
+* :mod:`.engine` -- compiled, re-anchorable replays (parameters as inputs);
+* :mod:`.predict` -- short-horizon predictions and re-anchored closed-loop segments;
+* :mod:`.witness` -- flow and force witnesses (the model's equations along the data);
+* :mod:`.locate` -- operating regimes and time intervals of the mismatch;
+* :mod:`.candidates` -- the effects of formats.md section 2 and wrong nominal values;
+* :mod:`.refit` -- signature scan and least-squares refit of one candidate;
+* :mod:`.explain` -- all candidates in parallel, ranked by evidence;
+* :mod:`.polish` -- a finding's values refined by the grey-box estimator;
+* :mod:`.core` -- :func:`diagnose`: replay, locate, explain, augment, refit;
+* :mod:`.report`, :mod:`.figures` -- the HTML/PDF report; :mod:`.cli` -- ``workbench
+  diagnose``; :mod:`.bench` -- ``workbench bench diagnose``;
+* :mod:`.synth` -- recordings of rigs with a concealed effect (tests, proof design;
+  the diagnosis never imports it).
+
+Examples
+--------
+>>> from workbench.diagnose import diagnose
+>>> d = diagnose("plant.toml", "recording.csv")   # doctest: +SKIP
+>>> print(d.summary())                            # doctest: +SKIP
+>>> d.write("diagnosis/")                         # doctest: +SKIP
+"""
+
+from .candidates import Candidate, Free, candidates
+from .core import Diagnosis, Finding, diagnose, replay
+from .explain import Ranked
+
+__all__ = ["diagnose", "Diagnosis", "Finding", "Ranked", "Candidate", "Free", "candidates",
+           "replay"]

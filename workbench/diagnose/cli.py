@@ -1,0 +1,62 @@
+"""``workbench diagnose PLANT.toml RECORDING --out DIR``: the command-line part."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+__all__ = ["add_cli", "run"]
+
+DESCRIPTION = (
+    "Diagnose where the nominal plant and a recording differ and what physics is missing. "
+    "Replays the recording (closed loop on r with the plant file's [controller] when both "
+    "exist, else open loop on u re-anchored on the measured state), locates the mismatch in "
+    "time and operating regime, refits every candidate effect of formats.md section 2 "
+    "(dry_friction, valve_deadband, valve_offset, valve_dynamics, line_dynamics, leakage, "
+    "supply_droop, heat_transfer) and wrong nominal values (parameter_error: load.mass, "
+    "load.viscous_friction, valve.sonic_conductance, supply.pressure), ranks them by evidence "
+    "and adds what is significant. Writes DIR/diagnosis.json (formats.md section 4), "
+    "DIR/plant.augmented.toml, DIR/report.html (+ report.pdf) and DIR/details.json "
+    "(every candidate's evidence).")
+
+
+def add_cli(subparsers) -> argparse.ArgumentParser:
+    """Add the ``diagnose`` sub-command to ``workbench``'s sub-parsers."""
+    from ..params import EFFECT_NAMES
+    p = subparsers.add_parser("diagnose", help="locate and explain a model/recording mismatch",
+                              description=DESCRIPTION,
+                              epilog="Units are SI (m, Pa absolute, kg, s, V). Example: "
+                                     "workbench diagnose plant.toml run.csv --out diag/")
+    p.add_argument("plant", metavar="PLANT.toml", help="nominal plant file")
+    p.add_argument("recording", metavar="RECORDING", help="recording (.csv or .mat)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
+    p.add_argument("--json", action="store_true", help="print diagnosis.json instead of a summary")
+    p.add_argument("--quiet", action="store_true", help="no progress messages (on stderr)")
+    p.add_argument("--effects", nargs="+", metavar="EFFECT",
+                   choices=list(EFFECT_NAMES) + ["parameter_error"],
+                   help="candidates to test (default: all effects and parameter_error)")
+    p.add_argument("--mode", choices=("auto", "closed", "open"), default="auto",
+                   help="replay mode (default auto: closed loop when r and [controller] exist)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="processes for the candidate refits (default: all cores)")
+    p.add_argument("--no-report", action="store_true", help="do not write report.html/.pdf")
+    p.set_defaults(func=run)
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the sub-command (errors a user can cause are WorkbenchError: exit 2 in main)."""
+    from .core import diagnose
+    verbose = not args.quiet and not args.json
+    if verbose:
+        print(f"diagnosing {args.recording} on {args.plant} ...", file=sys.stderr, flush=True)
+    d = diagnose(args.plant, args.recording, effects=args.effects, workers=args.workers,
+                 mode=args.mode, verbose=verbose)
+    paths = d.write(args.out, report=not args.no_report)
+    if args.json:
+        print(json.dumps(d.to_json(), indent=2))
+    else:
+        print(d.summary())
+        print("wrote " + ", ".join(str(p) for p in paths.values()))
+    return 0

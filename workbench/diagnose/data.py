@@ -1,0 +1,282 @@
+"""What a diagnosis works from: the recording checked, smoothed, differentiated, its noise.
+
+:func:`prepare` turns a plant and a recording into :class:`Prepared`: the replay mode
+(closed loop when the recording has ``r`` and the plant file a controller that
+reproduces the recorded ``u``; otherwise open loop, re-anchored), the controller's
+sample instants, Savitzky-Golay smoothed signals and their derivatives (velocity and
+acceleration from the position, pressure rates), and the sensor noise of each
+signal. Problems with the input become :class:`~workbench.errors.InputError` when
+nothing can be done (too short, no motion), and *notes* when a reduced diagnosis is
+still possible (no pressures, no controller, a controller that does not match).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.signal import savgol_coeffs, savgol_filter
+
+from ..errors import InputError
+from ..plant import Plant
+from ..recording import Recording
+
+__all__ = ["Prepared", "prepare", "MIN_DURATION", "SHORT_DURATION", "savgol"]
+
+#: s: shorter recordings are refused (a few closed-loop time constants at least).
+MIN_DURATION = 2.0
+#: s: shorter recordings are diagnosed with a warning (few events to learn from).
+SHORT_DURATION = 8.0
+#: s: Savitzky-Golay window for velocity and acceleration from the position.
+WINDOW_X = 0.031
+#: s: Savitzky-Golay window for the pressure rates.
+WINDOW_P = 0.011
+#: %: fit of the recorded command by the plant file's controller (at its sample
+#: instants, from the recorded r and x) below which the controller is taken not to be
+#: the loop that ran (a delay, other gains, a filter) and the replay is open loop.
+CONTROLLER_AGREEMENT = 90.0
+#: s: long Savitzky-Golay window for the slow pressure rates (leaks, heat exchange).
+WINDOW_SLOW = 0.101
+
+
+def _odd_window(seconds: float, dt: float, minimum: int = 5) -> int:
+    n = max(int(round(seconds / dt)), minimum)
+    return n if n % 2 else n + 1
+
+
+def savgol(y: np.ndarray, window: int, order: int, deriv: int = 0, dt: float = 1.0) -> np.ndarray:
+    """Savitzky-Golay filter (``mode="interp"`` at the ends)."""
+    window = min(window, len(y) - (1 - len(y) % 2))
+    order = min(order, window - 1)
+    return savgol_filter(np.asarray(y, dtype=float), window, order, deriv=deriv, delta=dt,
+                         mode="interp")
+
+
+def _noise_std(y: np.ndarray) -> float:
+    """Sensor noise (standard deviation) of ``y``: robust spread of its fine structure.
+
+    A quantised signal whose noise is below one step (LSB) shows long runs of equal
+    values, so the robust spread alone would say "no noise"; the quantisation error
+    (LSB / sqrt 12) is then the noise floor.
+    """
+    w, o = 7, 2
+    resid = y - savgol(y, w, o)
+    h0 = savgol_coeffs(w, o)[w // 2]
+    mad = np.median(np.abs(resid - np.median(resid)))
+    robust = float(1.4826 * mad / np.sqrt(1.0 - h0))
+    steps = np.abs(np.diff(y))
+    steps = steps[steps > 0]
+    lsb = float(np.percentile(steps, 1)) if len(steps) else 0.0
+    return max(robust, lsb / np.sqrt(12.0))
+
+
+@dataclass
+class Prepared:
+    """A recording made ready for the diagnosis (arrays on the recording's samples).
+
+    Attributes
+    ----------
+    plant : the nominal Plant. rec : the Recording. t : s from the first sample.
+    dt : sample time, s. closed : closed-loop replay. controller : PID or None.
+    ratio : samples per controller period. phase : index of the first controller instant.
+    x, p_a, p_b : measured (p_* None without pressures).
+    xs, v, a : smoothed position (m), velocity (m/s), acceleration (m/s^2).
+    pas, pbs, dpa, dpb : smoothed pressures (Pa) and their rates (Pa/s).
+    noise : sensor noise per signal (same unit).
+    signals : the measured outputs fitted (x, and p_a, p_b when recorded).
+    notes : what was reduced or assumed, in words for the report.
+    """
+
+    plant: Plant
+    rec: Recording
+    t: np.ndarray
+    dt: float
+    closed: bool
+    controller: Any
+    ratio: int
+    phase: int
+    x: np.ndarray
+    p_a: np.ndarray | None
+    p_b: np.ndarray | None
+    xs: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    pas: np.ndarray | None
+    pbs: np.ndarray | None
+    dpa: np.ndarray | None
+    dpb: np.ndarray | None
+    noise: dict[str, float]
+    signals: tuple[str, ...]
+    win_x: int
+    win_p: int
+    win_slow: int
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+    @property
+    def has_pressures(self) -> bool:
+        return self.p_a is not None and self.p_b is not None
+
+    def measured(self, name: str) -> np.ndarray:
+        return {"x": self.x, "p_a": self.p_a, "p_b": self.p_b}[name]
+
+    def smooth_x(self, y: np.ndarray) -> np.ndarray:
+        """The smoothing applied to the acceleration (for model rates of v)."""
+        return savgol(y, self.win_x, 3, dt=self.dt)
+
+    def smooth_p(self, y: np.ndarray) -> np.ndarray:
+        """The smoothing applied to the pressure rates (for model rates of p)."""
+        return savgol(y, self.win_p, 2, dt=self.dt)
+
+    def smooth_slow(self, y: np.ndarray, deriv: int = 0) -> np.ndarray:
+        """The long-window smoothing (slow pressure rates)."""
+        return savgol(y, self.win_slow, 2, deriv=deriv, dt=self.dt)
+
+    def control_instants(self) -> np.ndarray:
+        """Boolean mask of the samples at which the controller updated."""
+        m = np.zeros(self.n, dtype=bool)
+        m[self.phase::self.ratio] = True
+        return m
+
+    def e_prev(self) -> np.ndarray:
+        """At each sample, r - x at the previous controller instant (controller memory)."""
+        if "r" not in self.rec:
+            return np.zeros(self.n)
+        e = np.asarray(self.rec["r"]) - self.x
+        idx = np.arange(self.n)
+        prev = np.where(idx - self.ratio >= 0, idx - self.ratio, idx)
+        return e[prev]
+
+
+def _controller_phase(u: np.ndarray, ratio: int) -> tuple[int, float]:
+    """Phase (sample index mod ratio) at which u changes, and the share of changes there."""
+    changes = np.flatnonzero(np.abs(np.diff(u)) > 1e-12) + 1
+    if len(changes) == 0 or ratio <= 1:
+        return 0, 1.0
+    counts = np.bincount(changes % ratio, minlength=ratio)
+    ph = int(np.argmax(counts))
+    return ph, float(counts[ph] / counts.sum())
+
+
+def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
+    """Check the recording against the plant and prepare the signals.
+
+    Parameters
+    ----------
+    plant : the nominal plant.
+    rec : the recording.
+    mode : "auto", "closed" or "open" (replay mode).
+
+    Raises
+    ------
+    InputError
+        Too short, no motion at all, a sample time the controller period is not a
+        multiple of, or a closed-loop replay asked for without ``r`` or controller.
+    """
+    notes: list[str] = []
+    t = np.asarray(rec.t, dtype=float) - float(rec.t[0])
+    n = len(t)
+    src = rec.source
+    if rec.duration < MIN_DURATION or n < 50:
+        raise InputError(f"the recording is too short for a diagnosis: {rec.duration:.3g} s, "
+                         f"{n} samples; at least {MIN_DURATION:g} s (and 50 samples) with the "
+                         "piston moving are needed, better 20 s or more with steps both ways",
+                         source=src)
+    steps = np.diff(t)
+    dt = float(np.median(steps))
+    if np.max(np.abs(steps - dt)) > 0.05 * dt:
+        notes.append(f"the sample time varies (median {dt * 1e3:.3g} ms, range "
+                     f"{steps.min() * 1e3:.3g}..{steps.max() * 1e3:.3g} ms); the signals are "
+                     "treated as equally spaced")
+    if rec.duration < SHORT_DURATION:
+        notes.append(f"short recording ({rec.duration:.3g} s): few events to learn from, "
+                     "so weak effects may go unnoticed")
+    x = np.asarray(rec["x"], dtype=float)
+    if np.ptp(x) < 1e-3 * plant.stroke:
+        raise InputError(f"the piston hardly moves in this recording (position range "
+                         f"{np.ptp(x) * 1e3:.3g} mm): nothing to diagnose", source=src,
+                         location="column 'x'")
+    has_p = "p_a" in rec and "p_b" in rec
+    if not has_p:
+        what = "neither p_a nor p_b" if ("p_a" not in rec and "p_b" not in rec) else \
+            ("no p_b" if "p_a" in rec else "no p_a")
+        notes.append(f"the recording has {what}: without both chamber pressures the flow "
+                     "witnesses are not available, so the diagnosis is reduced to what the "
+                     "position shows (dry friction, valve deadband and offset, mass and "
+                     "viscous friction); leakage, lines, supply droop and heat transfer "
+                     "cannot be told apart from position alone")
+    has_r = "r" in rec
+    has_ctrl = plant.params.has_controller
+    controller = None
+    ratio, phase = 1, 0
+    closed = False
+    if has_ctrl:
+        from ..controllers import from_plant
+        controller = from_plant(plant)
+        ratio = int(round(controller.sample_time / dt))
+        if ratio < 1 or abs(ratio * dt - controller.sample_time) > 0.02 * dt:
+            notes.append(f"the controller period ({controller.sample_time:g} s) is not a "
+                         f"multiple of the sample time ({dt:g} s): open-loop replay")
+            ratio, controller = 1, None
+        else:
+            phase, share = _controller_phase(np.asarray(rec["u"]), ratio)
+    if mode == "closed":
+        if not has_r:
+            raise InputError("closed-loop replay needs an 'r' column", source=src)
+        if controller is None:
+            raise InputError("closed-loop replay needs a [controller] section (with a period "
+                             "that is a multiple of the sample time)", source=plant.params.source)
+    if has_r and not has_ctrl:
+        notes.append("the recording has a reference r but the plant file has no [controller]: "
+                     "the recording is replayed open loop on its command u, re-anchored on the "
+                     "measured state every few tenths of a second (add the [controller] that "
+                     "ran for a closed-loop replay)")
+    elif has_ctrl and not has_r and controller is not None:
+        notes.append("the plant file has a [controller] but the recording has no reference r: "
+                     "open-loop replay on the recorded command u, re-anchored")
+    win_x = _odd_window(WINDOW_X, dt)
+    win_p = _odd_window(WINDOW_P, dt)
+    xs = savgol(x, win_x, 3)
+    v = savgol(x, win_x, 3, deriv=1, dt=dt)
+    a = savgol(x, win_x, 3, deriv=2, dt=dt)
+    noise = {"x": _noise_std(x), "u": 0.0}
+    pa = pb = pas = pbs = dpa = dpb = None
+    if has_p:
+        pa = np.asarray(rec["p_a"], dtype=float)
+        pb = np.asarray(rec["p_b"], dtype=float)
+        pas, pbs = savgol(pa, win_p, 2), savgol(pb, win_p, 2)
+        dpa = savgol(pa, win_p, 2, deriv=1, dt=dt)
+        dpb = savgol(pb, win_p, 2, deriv=1, dt=dt)
+        noise["p_a"], noise["p_b"] = _noise_std(pa), _noise_std(pb)
+    if has_r and controller is not None and mode != "open":
+        closed = True
+        # Does the plant file's controller reproduce the recorded command?
+        from ..recording import fit
+        inst = np.zeros(n, dtype=bool)
+        inst[phase::ratio] = True
+        idx = np.flatnonzero(inst)
+        c = controller
+        state = c.reset()
+        u_pred = np.empty(len(idx))
+        r_rec = np.asarray(rec["r"])
+        for j, i in enumerate(idx):
+            state, u_pred[j] = c.update(state, float(r_rec[i]), {"x": float(x[i])})
+        u_pred = np.clip(u_pred, plant.params["valve.command_min"],
+                         plant.params["valve.command_max"])
+        u_rec = np.asarray(rec["u"])[idx]
+        agree = fit(u_rec, u_pred) if np.ptp(u_rec) > 0 else 100.0
+        if agree < CONTROLLER_AGREEMENT and mode != "closed":
+            closed = False
+            notes.append(f"the plant file's [controller] does not reproduce the recorded command "
+                         f"(fit of u {agree:.0f} %): it is probably not the loop that ran, so the "
+                         "recording is replayed open loop on u, re-anchored")
+    return Prepared(plant=plant, rec=rec, t=t, dt=dt, closed=closed,
+                    controller=controller if closed else controller, ratio=ratio, phase=phase,
+                    x=x, p_a=pa, p_b=pb, xs=xs, v=v, a=a, pas=pas, pbs=pbs, dpa=dpa, dpb=dpb,
+                    noise=noise, signals=("x",) + (("p_a", "p_b") if has_p else ()),
+                    win_x=win_x, win_p=win_p, win_slow=_odd_window(WINDOW_SLOW, dt, 9),
+                    notes=notes)

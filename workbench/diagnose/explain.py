@@ -1,0 +1,156 @@
+"""Explain a mismatch: refit every candidate (in parallel) and rank them by evidence.
+
+Evidence for a candidate with k fitted values, from its refit (:mod:`.refit`):
+
+* **gain**: the share of the nominal short-horizon prediction cost it removes,
+  ``(J0 - J) / J0``, and the gain per fitted value;
+* **information criterion**: ``dBIC = n ln(J0 / J) - k ln(n)`` with ``n`` the
+  effective number of independent observations (a few per prediction window and
+  signal, since residuals within a window are correlated) -- a gain that a few
+  free values could produce from the noise alone does not count;
+* **closed-loop check**: the re-anchored closed-loop replay must not get worse
+  (a model that predicts the next 0.2 s better but runs the loop worse is fitting
+  the noise or another effect);
+* **signature consistency**: the share of the gain found in the operating regimes
+  where the effect acts (:mod:`.locate`), against the share of time spent there.
+
+A candidate is *significant* when its dBIC exceeds :data:`DBIC_MIN` and it removes
+at least :data:`GAIN_MIN` of the mismatch. The winner is the significant candidate
+with the largest dBIC; further effects are added greedily while they stay
+significant on top of the ones found.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..params import PlantParams
+from .candidates import Candidate
+from .data import Prepared
+from .predict import Predictor
+from .refit import FitResult, fit_candidate
+
+__all__ = ["Ranked", "refit_all", "rank", "DBIC_MIN", "GAIN_MIN", "COST_ORDER"]
+
+#: Smallest information-criterion improvement that counts as evidence.
+DBIC_MIN = 10.0
+#: Smallest share of the mismatch an explanation must remove.
+GAIN_MIN = 0.25
+#: A candidate that makes the re-anchored closed-loop replay worse by more than this
+#: share is not accepted, however well it predicts the next 0.2 s.
+SEG_WORSE = -0.25
+#: Rough cost of refitting each candidate (for scheduling the slow ones first).
+COST_ORDER = {"line_dynamics": 6.0, "dry_friction": 4.0, "leakage": 3.0, "supply_droop": 3.0,
+              "valve_dynamics": 3.0, "heat_transfer": 2.0}
+
+_JOB: dict[str, Any] = {}
+
+
+def _work(i: int) -> FitResult:
+    j = _JOB
+    cand = j["cands"][i]
+    try:
+        return fit_candidate(j["prep"], j["params"], cand, j["shpe"], j["seg"],
+                             max_nfev=j["max_nfev"], jit=j["jit"], base=j["base"],
+                             start=j["starts"].get(cand.name))
+    except Exception as exc:  # noqa: BLE001 - one failing candidate must not stop the rest
+        return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values={}, std={}, ci95={},
+                         cost=float("inf"), signal_costs={}, seg_cost=None, grid=[], fits={},
+                         plant_values={}, error=f"{type(exc).__name__}: {exc}")
+
+
+def refit_all(prep: Prepared, params: PlantParams, cands: Sequence[Candidate], shpe: Predictor,
+              seg: Predictor | None, workers: int | None = None, max_nfev: int = 8,
+              jit: bool = True, base: Mapping[str, float] | None = None,
+              starts: Mapping[str, Mapping[str, float]] | None = None) -> list[FitResult]:
+    """Refit each candidate; in ``workers`` processes (default: the CPU count, at most 2
+    per candidate pair) when the platform can fork, else one after the other."""
+    global _JOB
+    order = sorted(range(len(cands)), key=lambda i: -COST_ORDER.get(cands[i].name, 1.0))
+    _JOB = {"prep": prep, "params": params, "cands": list(cands), "shpe": shpe, "seg": seg,
+            "max_nfev": max_nfev, "jit": jit, "base": dict(base or {}),
+            "starts": dict(starts or {})}
+    if workers is None:
+        workers = min(os.cpu_count() or 1, len(cands))
+    results: dict[int, FitResult] = {}
+    can_fork = "fork" in multiprocessing.get_all_start_methods()
+    try:
+        if workers > 1 and can_fork and len(cands) > 1:
+            ctx = multiprocessing.get_context("fork")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
+                futs = {i: ex.submit(_work, i) for i in order}
+                for i, f in futs.items():
+                    results[i] = f.result()
+        else:
+            for i in order:
+                results[i] = _work(i)
+    finally:
+        _JOB = {}
+    return [results[i] for i in range(len(cands))]
+
+
+@dataclass
+class Ranked:
+    """A refit candidate with its evidence (see the module docstring)."""
+
+    result: FitResult
+    gain: float
+    gain_per_value: float
+    dbic: float
+    seg_gain: float | None
+    consistency: float | None
+    significant: bool
+    weight: float = 0.0
+    reason: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.result.name
+
+
+def rank(results: Sequence[FitResult], cost0: float, seg0: float | None, n_eff: float,
+         consistency: Mapping[str, float] | None = None) -> list[Ranked]:
+    """Evidence for every candidate, best first; ``weight`` is the BIC weight of each
+    candidate against the others and against "nothing to add" (the nominal model)."""
+    consistency = consistency or {}
+    out = []
+    for r in results:
+        if r.error or not np.isfinite(r.cost):
+            out.append(Ranked(r, 0.0, 0.0, -math.inf, None, None, False,
+                              reason=r.error or "refit failed"))
+            continue
+        gain = (cost0 - r.cost) / cost0 if cost0 > 0 else 0.0
+        dbic = n_eff * math.log(max(cost0, 1e-300) / max(r.cost, 1e-300)) - r.k * math.log(n_eff)
+        seg_gain = None
+        if seg0 is not None and r.seg_cost is not None and seg0 > 0:
+            seg_gain = (seg0 - r.seg_cost) / seg0
+        reasons = []
+        sig = True
+        if dbic < DBIC_MIN:
+            sig = False
+            reasons.append(f"dBIC {dbic:.0f} < {DBIC_MIN:g}")
+        if gain < GAIN_MIN:
+            sig = False
+            reasons.append(f"gain {100 * gain:.0f} % < {100 * GAIN_MIN:.0f} %")
+        if seg_gain is not None and seg_gain < SEG_WORSE:
+            sig = False
+            reasons.append(f"closed loop worse ({100 * seg_gain:.0f} %)")
+        if r.at_bound and gain < 0.9:
+            reasons.append("at range edge: " + ", ".join(k.split(".", 1)[-1] for k in r.at_bound))
+        out.append(Ranked(r, gain, gain / max(r.k, 1), dbic, seg_gain,
+                          consistency.get(r.name), sig, reason="; ".join(reasons)))
+    finite = [o.dbic for o in out if np.isfinite(o.dbic)]
+    ref = max(finite + [0.0])
+    z = sum(math.exp(0.5 * (o.dbic - ref)) for o in out if np.isfinite(o.dbic)) \
+        + math.exp(0.5 * (0.0 - ref))
+    for o in out:
+        o.weight = math.exp(0.5 * (o.dbic - ref)) / z if np.isfinite(o.dbic) else 0.0
+    out.sort(key=lambda o: (-o.significant, -o.dbic if np.isfinite(o.dbic) else math.inf))
+    return out

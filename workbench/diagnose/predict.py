@@ -1,0 +1,255 @@
+"""Comparable replays: short-horizon predictions and re-anchored closed-loop segments.
+
+Two ways of asking "does the model reproduce the recording?" that stay comparable
+where a long open-loop replay would drift away:
+
+* :func:`horizons` -- *short-horizon predictions*: every ``horizon`` seconds the model
+  is put on the measured state and run open loop on the recorded command; its
+  position and pressures are compared with the measurement until the next anchor.
+  This is the refit objective: it uses only what the rig did (the applied command),
+  it is smooth in the parameters, and a correct model reaches the noise level.
+* :func:`segments` -- the recording's closed loop (reference, plant-file controller)
+  re-anchored every ``length`` seconds (at controller instants, at rest where
+  possible), i.e. the replay of ``workbench simulate`` with its drift cut off.
+
+Both are :class:`Predictor` objects: engine inputs for the selected samples plus
+the weighting of the residuals (measurement noise of each signal).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..recording import fit
+from .data import Prepared
+from .engine import INPUT_ROWS, EngineInputs
+
+__all__ = ["Predictor", "horizons", "segments", "default_step", "HORIZON", "SEGMENT"]
+
+#: s: short-horizon prediction length (about ten time constants of the chambers,
+#: a few of the position loop).
+HORIZON = 0.2
+#: s: closed-loop segment length.
+SEGMENT = 2.0
+
+
+@dataclass
+class Predictor:
+    """Engine inputs on selected samples and how to weigh the residuals.
+
+    Attributes
+    ----------
+    kind : "horizons" or "segments".
+    index : (M,) recording samples simulated, in order.
+    inputs : engine inputs for those samples.
+    starts : (W,) positions in ``index`` where the model is re-anchored.
+    signals : compared signals. sigma : their noise (weights 1/sigma).
+    decimate : residual vector keeps every n-th simulated sample.
+    step : recording samples per simulated sample (the engine's step is step * dt).
+    """
+
+    kind: str
+    prep: Prepared
+    index: np.ndarray
+    inputs: EngineInputs
+    starts: np.ndarray
+    signals: tuple[str, ...]
+    sigma: dict[str, float]
+    decimate: int = 4
+    step: int = 1
+
+    @property
+    def windows(self) -> int:
+        return int(len(self.starts))
+
+    @property
+    def n_eff(self) -> float:
+        """Effective number of independent observations (for the information criteria):
+        a few per window and signal, since the residuals within a window are correlated."""
+        return float(max(3 * self.windows * len(self.signals), 10))
+
+    def measured(self, s: str) -> np.ndarray:
+        return self.prep.measured(s)[self.index]
+
+    def residuals(self, Y: np.ndarray) -> np.ndarray:
+        """Weighted residual vector (measurement - model) / noise, decimated."""
+        out = []
+        for s in self.signals:
+            row = ("x", "p_a", "p_b").index(s)
+            r = (self.measured(s) - Y[row]) / self.sigma[s]
+            out.append(r[::self.decimate])
+        r = np.concatenate(out)
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def cost(self, Y: np.ndarray) -> float:
+        """Mean squared weighted residual, summed over signals (1 per signal = noise level)."""
+        total = 0.0
+        for s in self.signals:
+            row = ("x", "p_a", "p_b").index(s)
+            r = (self.measured(s) - Y[row]) / self.sigma[s]
+            total += float(np.mean(r * r)) if np.all(np.isfinite(r)) else 1e12
+        return total
+
+    def signal_costs(self, Y: np.ndarray) -> dict[str, float]:
+        out = {}
+        for s in self.signals:
+            row = ("x", "p_a", "p_b").index(s)
+            r = (self.measured(s) - Y[row]) / self.sigma[s]
+            out[s] = float(np.mean(r * r)) if np.all(np.isfinite(r)) else 1e12
+        return out
+
+    def fits(self, Y: np.ndarray) -> dict[str, float]:
+        """NRMSE fit (%) of each signal over the simulated samples."""
+        out = {}
+        for s in self.signals:
+            row = ("x", "p_a", "p_b").index(s)
+            y = Y[row]
+            out[s] = fit(self.measured(s), y) if np.all(np.isfinite(y)) else float("-inf")
+        return out
+
+    def full(self, Y: np.ndarray, row: int) -> np.ndarray:
+        """A model output on the recording's samples (NaN where not simulated)."""
+        return self._spread(np.asarray(Y[row], dtype=float))
+
+    def _spread(self, values: np.ndarray) -> np.ndarray:
+        """Values at the simulated samples held over their steps, NaN elsewhere."""
+        out = np.full(self.prep.n, np.nan)
+        for j in range(self.step):
+            idx = self.index + j
+            ok = idx < self.prep.n
+            out[idx[ok]] = values[ok]
+        return out
+
+    def error_by_sample(self, Y: np.ndarray) -> np.ndarray:
+        """Squared weighted residual per recording sample, summed over signals (NaN outside)."""
+        e = np.zeros(len(self.index))
+        for s in self.signals:
+            row = ("x", "p_a", "p_b").index(s)
+            e += ((self.measured(s) - Y[row]) / self.sigma[s]) ** 2
+        return self._spread(e)
+
+
+def _base_inputs(prep: Prepared, index: np.ndarray, step: int = 1) -> np.ndarray:
+    row = {k: i for i, k in enumerate(INPUT_ROWS)}
+    d = np.zeros((len(INPUT_ROWS), len(index)))
+    u = np.asarray(prep.rec["u"], dtype=float)
+    if step > 1:          # the command held over each simulated step: its mean
+        u = np.convolve(u, np.ones(step) / step, mode="full")[step - 1:][:len(u)]
+        u[-step:] = np.asarray(prep.rec["u"])[-step:]
+    d[row["u_rec"]] = u[index]
+    d[row["x_m"]] = prep.xs[index]
+    d[row["v_m"]] = prep.v[index]
+    if prep.has_pressures:
+        d[row["p_a_m"]] = prep.pas[index]
+        d[row["p_b_m"]] = prep.pbs[index]
+    if "r" in prep.rec:
+        d[row["r"]] = np.asarray(prep.rec["r"])[index]
+    inst = prep.control_instants()
+    if step > 1:          # a controller instant anywhere within the step
+        inst = np.convolve(inst.astype(float), np.ones(step), mode="full")[step - 1:]
+        inst = inst[:len(prep.t)] > 0
+    d[row["control_instant"]] = inst[index]
+    d[row["e_prev_m"]] = prep.e_prev()[index]
+    return d
+
+
+def _sigma(prep: Prepared) -> dict[str, float]:
+    sig = {"x": max(prep.noise["x"], 1e-6 * prep.plant.stroke)}
+    if prep.has_pressures:
+        sig["p_a"] = max(prep.noise["p_a"], 10.0)
+        sig["p_b"] = max(prep.noise["p_b"], 10.0)
+    return sig
+
+
+def default_step(prep: Prepared) -> int:
+    """Recording samples per engine step: about 2 ms (the chambers' fastest time
+    constants are several ms), dividing the controller period."""
+    step = max(int(round(0.002 / prep.dt)), 1)
+    while step > 1 and prep.closed and prep.ratio % step:
+        step -= 1
+    return step
+
+
+#: s: longest stretch of recording the short-horizon predictions cover (longer
+#: recordings: the busiest half of the windows plus evenly spread quiet ones).
+MAX_PREDICTED = 60.0
+
+
+def horizons(prep: Prepared, horizon: float = HORIZON, coverage: float | None = None,
+             decimate: int = 2, step: int | None = None) -> Predictor:
+    """Short-horizon open-loop predictions from the measured state every ``horizon`` s.
+
+    ``coverage`` < 1 keeps that share of the windows: half of them the busiest (a
+    window where nothing happens tells little about most effects), half spread
+    evenly over the rest (leaks and heat exchange show at rest). Default: all windows
+    up to :data:`MAX_PREDICTED` seconds of recording.
+    """
+    n = prep.n
+    step = default_step(prep) if step is None else step
+    h = max(int(round(horizon / prep.dt)), 5)
+    h -= h % step
+    first = prep.win_x + (-(prep.win_x - prep.phase)) % step if prep.closed else prep.win_x
+    starts = np.arange(first, n - h, h)
+    if coverage is None:
+        coverage = min(1.0, MAX_PREDICTED / max(len(starts) * h * prep.dt, 1e-9))
+    if coverage < 1.0 and len(starts) > 8:
+        act = np.array([np.ptp(prep.xs[s:s + h]) / max(np.ptp(prep.xs), 1e-9)
+                        + np.std(np.diff(np.asarray(prep.rec["u"])[s:s + h])) for s in starts])
+        keep = max(int(round(coverage * len(starts))), 8)
+        order = np.argsort(-act)
+        busy = order[:keep // 2]
+        rest = np.sort(order[keep // 2:])
+        spread = rest[np.linspace(0, len(rest) - 1, keep - len(busy)).astype(int)]
+        starts = starts[np.unique(np.concatenate([busy, spread]))]
+    hs = h // step
+    index = (starts[:, None] + step * np.arange(hs)[None, :]).ravel()
+    d = _base_inputs(prep, index, step)
+    row = {k: i for i, k in enumerate(INPUT_ROWS)}
+    pos = np.arange(len(starts)) * hs
+    d[row["anchor"], pos] = 1.0
+    if prep.has_pressures:
+        d[row["anchor_p"], pos] = 1.0
+    # hidden states: from rest at the first window, then carried over (when windows
+    # are contiguous) or reset to rest (after a gap)
+    gap = np.concatenate(([True], np.diff(starts) > h))
+    d[row["anchor_hidden"], pos[gap]] = 1.0
+    d[row["closed_loop"]] = 0.0
+    return Predictor("horizons", prep, index, EngineInputs(d), pos, prep.signals, _sigma(prep),
+                     decimate, step)
+
+
+def segments(prep: Prepared, length: float = SEGMENT, decimate: int = 2,
+             step: int | None = None) -> Predictor:
+    """The closed loop re-anchored every ``length`` s (open loop on u without controller)."""
+    n = prep.n
+    step = default_step(prep) if step is None else step
+    seg = max(int(round(length / prep.dt)), 10)
+    if prep.closed:
+        seg -= seg % prep.ratio
+    seg -= seg % step
+    nominal = np.arange(prep.phase if prep.closed else 0, n - 1, seg)
+    rest = np.abs(prep.v) < 3e-3
+    inst = prep.control_instants() if prep.closed else np.ones(n, dtype=bool)
+    if not prep.closed:
+        inst &= (np.arange(n) % step) == 0
+    starts = []
+    for s in nominal:
+        lo, hi = max(s - seg // 4, 0), min(s + seg // 4, n - 2)
+        cand = np.flatnonzero(rest[lo:hi] & inst[lo:hi]) + lo
+        starts.append(int(cand[np.argmin(np.abs(cand - s))]) if len(cand) else int(s))
+    starts = np.unique(np.array(starts))
+    if starts[0] != nominal[0]:
+        starts = np.concatenate(([nominal[0]], starts))
+    index = np.arange(starts[0], n, step)
+    d = _base_inputs(prep, index, step)
+    row = {k: i for i, k in enumerate(INPUT_ROWS)}
+    pos = (starts - starts[0]) // step
+    d[row["anchor"], pos] = 1.0
+    if prep.has_pressures:
+        d[row["anchor_p"], pos] = 1.0
+    d[row["anchor_hidden"], pos] = 1.0
+    d[row["closed_loop"]] = 1.0 if prep.closed else 0.0
+    return Predictor("segments", prep, index, EngineInputs(d), pos, prep.signals, _sigma(prep),
+                     decimate, step)

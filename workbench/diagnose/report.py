@@ -1,0 +1,168 @@
+"""The diagnosis report (HTML + PDF through :mod:`workbench.report`). Renders, never computes."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .. import report as rp
+from ..params import EFFECTS
+
+__all__ = ["write_report", "build_report"]
+
+
+def _ci_text(ci) -> str:
+    if not ci:
+        return "n/a"
+    lo, hi = ci
+    return f"{rp.fmt(lo)} .. {rp.fmt(hi)}"
+
+
+def build_report(d) -> rp.Report:
+    """The :class:`workbench.report.Report` of a :class:`~.core.Diagnosis`."""
+    from . import figures
+    prep = d.prep
+    sections = []
+    # ---- summary
+    if d.findings:
+        names = ", ".join(f.effect + (" (" + ", ".join(f.parameters) + ")"
+                                      if f.effect == "parameter_error" else "")
+                          for f in d.findings)
+        status = rp.Status("PASS", f"found {names}; fit "
+                           + ", ".join(f"{k} {d.fit_before[k]:.1f} -> {d.fit_after[k]:.1f} %"
+                                       for k in d.fit_before))
+    else:
+        status = rp.Status("NOTE", "no significant mismatch: the nominal model explains the "
+                                   "recording within its noise (no finding)")
+    kv = [("plant file", d.plant_file), ("recording", d.recording_file),
+          ("samples", int(prep.n)), ("duration", float(prep.rec.duration), "s"),
+          ("sample time", float(prep.dt) * 1e3, "ms"), ("replay", d.mode),
+          ("signals compared", ", ".join(prep.signals)),
+          ("position noise", prep.noise["x"] * 1e6, "um")]
+    if prep.has_pressures:
+        kv.append(("pressure noise", prep.noise["p_a"], "Pa"))
+    kv.append(("diagnosis wall time", d.timings.get("total", float("nan")), "s"))
+    blocks = [rp.KeyValues(kv)]
+    fit_rows = [[s, d.fit_before[s]] + [f.fit_after.get(s) for f in d.findings]
+                for s in d.fit_before]
+    cols = ["signal", "nominal"] + [f"+ {f.effect}" for f in d.findings]
+    blocks.append(rp.Table(cols, fit_rows, units=[""] + ["%"] * (len(cols) - 1),
+                           caption="Fit (100 (1 - ||y - y_model|| / ||y - mean y||)) of the "
+                                   "replay, per signal, before and after each finding"))
+    for n in d.notes:
+        blocks.append(rp.Status("NOTE", n))
+    sections.append(rp.Section("Summary", blocks))
+
+    # ---- findings
+    fb = []
+    if d.findings:
+        rows = []
+        for i, f in enumerate(d.findings, 1):
+            rows.append([i, f.effect, f.confidence,
+                         ", ".join(f"{k} = {rp.fmt(v)}" for k, v in f.parameters.items()),
+                         "; ".join(f"{a:.2f}-{b:.2f} s" for a, b in f.where[:6])
+                         + (" ..." if len(f.where) > 6 else "")])
+        fb.append(rp.Table(["#", "effect", "confidence", "parameters (SI)", "where"], rows,
+                           caption="Findings, most important first"))
+        for i, f in enumerate(d.findings, 1):
+            fb.append(rp.Heading(f"{i}. {f.effect}"))
+            fb.append(rp.Paragraph(f.evidence))
+            pol = d.polished.get(f.name)
+            if pol:
+                spans = "; ".join(f"{a:.2f}-{b:.2f} s" for a, b in pol["windows_s"])
+                fb.append(rp.Paragraph(
+                    f"Values refined by the grey-box estimator (multiple shooting, IPOPT) on "
+                    f"the windows {spans}, where this finding removes most of the mismatch "
+                    f"({pol['status']}, {pol['wall_s']:.1f} s); intervals from its covariance."))
+            prow = []
+            for k, v in f.plant_values.items():
+                if k == "lines.segments":
+                    continue
+                unit = next((kk.unit for e in EFFECTS.values() for kk in e if kk.path == k), "")
+                std = f.std.get(k)
+                prow.append([k, float(v), unit, None if std is None else float(std),
+                             _ci_text(f.ci95.get(k))])
+            fb.append(rp.Table(["plant key", "fitted", "unit", "std", "95 % interval"], prow,
+                               caption=f"Fitted values of finding {i} (plant.augmented.toml)"))
+    else:
+        fb.append(rp.Paragraph("No candidate removes a significant share of the mismatch: "
+                               "findings are empty and plant.augmented.toml equals the nominal "
+                               "plant."))
+    sections.append(rp.Section("Findings", fb))
+
+    # ---- replay figure
+    t = prep.t
+    meas = {s: prep.measured(s) for s in prep.signals}
+    meas["u"] = np.asarray(prep.rec["u"])
+    spans = d.findings[0].where if d.findings else []
+    ref = np.asarray(prep.rec["r"]) if "r" in prep.rec else None
+    fig = figures.replay_figure(t, meas, d.replay_nominal, d.replay_augmented, d.located, spans,
+                                reference=ref, title="recording vs nominal vs augmented model")
+    sections.append(rp.Section("Recording and models", [
+        rp.Paragraph(f"Replay: {d.mode}. Grey: intervals where the nominal model's short-horizon "
+                     "predictions miss the recording; orange: where the first finding removes "
+                     "the mismatch."),
+        rp.Figure(fig, caption="Recording, nominal model and augmented model")]))
+
+    # ---- signatures
+    sb = [rp.Paragraph(
+        "Flow witnesses: mass flow each chamber received (chamber equation with the measured "
+        "pressure, position and velocity) minus what the valve law gives at the recorded "
+        "command and pressures. Force witness: what the piston's equation of motion leaves "
+        "unexplained (m a - forces). Prediction error: squared residual of the short-horizon "
+        "predictions in units of the measurement noise.")]
+    if d.err_nominal is not None:
+        fig = figures.signature_figure(t, d.witness, d.witness_after, d.err_nominal, d.err_after,
+                                       d.located, title="residual signatures")
+        sb.append(rp.Figure(fig, caption="Residual signatures, nominal vs augmented"))
+    fig = figures.regime_figure(d.regime_share, title="where the nominal mismatch lives")
+    sb.append(rp.Figure(fig, caption="Share of the nominal mismatch per operating regime",
+                        width=0.8))
+    sb.append(rp.Table(["regime", "share of mismatch", "share of time", "ratio"],
+                       [[k, 100 * v["error_share"], 100 * v["time_share"], v["ratio"]]
+                        for k, v in d.regime_share.items()], units=["", "%", "%", "-"],
+                       caption="Operating regimes of the mismatch"))
+    if d.located:
+        sb.append(rp.Paragraph("Located intervals: " + "; ".join(
+            f"{a:.2f}-{b:.2f} s" for a, b in d.located)))
+    sections.append(rp.Section("Residual signatures and location", sb))
+
+    # ---- candidates
+    rows = []
+    for r in d.ranking:
+        vals = ", ".join(f"{k.split('.', 1)[-1]} = {rp.fmt(v, digits=3)}"
+                         for k, v in r.result.values.items())
+        rows.append([r.name.replace("parameter_error:", "parameter_error: "),
+                     "yes" if r.significant else "no", 100 * r.gain, r.dbic if np.isfinite(r.dbic)
+                     else None, None if r.seg_gain is None else 100 * r.seg_gain,
+                     r.consistency, r.weight, vals, r.reason or r.result.error or ""])
+    cb = [rp.Paragraph(
+        "Every candidate is added to the nominal plant and refitted on short-horizon "
+        "predictions. gain: share of the prediction error it removes; dBIC: information "
+        "criterion gain (penalises each fitted value); closed-loop: change of the re-anchored "
+        "closed-loop replay error; consistency: share of its gain in the regimes where the "
+        "effect acts, relative to time spent there; weight: BIC weight among all candidates "
+        "and 'nothing to add'."),
+        rp.Table(["candidate", "significant", "gain", "dBIC", "closed-loop", "consistency",
+                  "weight", "fitted", "note"], rows,
+                 units=["", "", "%", "-", "%", "-", "-", "", ""],
+                 caption="Candidates ranked by evidence", digits=3)]
+    fig = figures.ranking_figure([r.name for r in d.ranking], [r.gain for r in d.ranking],
+                                 [r.significant for r in d.ranking],
+                                 title="candidate ranking")
+    cb.append(rp.Figure(fig, caption="Share of the mismatch removed by each candidate", width=0.8))
+    sections.append(rp.Section("Candidates", cb))
+    title = "Mismatch diagnosis"
+    return rp.Report(title, subtitle=f"{Path(d.recording_file).name} on {Path(d.plant_file).name}",
+                     status=status, sections=sections,
+                     provenance=rp.provenance(plant_file=d.plant_file if Path(d.plant_file).exists()
+                                              else None,
+                                              command_line=" ".join(sys.argv),
+                                              extra=[("recording", d.recording_file)]))
+
+
+def write_report(d, out_dir) -> tuple[Path, Path]:
+    """Write ``report.html`` and ``report.pdf`` into ``out_dir``."""
+    return rp.write(build_report(d), out_dir)
