@@ -281,7 +281,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "metrics": mets, "errors": errors, "plan_deviation": plan_dev,
                    "plans": {k: p.summary() for k, p in plans.items()}}
         atomic_write_text(out / "summary.json",
-                          json.dumps(summary, indent=1, default=_json_default) + "\n")
+                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
     print(f"design {status.outcome}: {status.message}\n  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
 
@@ -342,16 +342,6 @@ FIG_DPI = {"value": 170}
 
 def _figure(fig, caption: str):
     return rp.Figure(fig, caption, dpi=FIG_DPI["value"])
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.bool_):
-        return bool(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 if __name__ == "__main__":

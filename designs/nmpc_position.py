@@ -409,7 +409,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "solve_time": stats, "validation_nmpc": v_n.to_dict(),
                    "validation_pd": v_p.to_dict(), "quick": quick}
         atomic_write_text(out / "summary.json",
-                          json.dumps(summary, indent=1, default=_json_default) + "\n")
+                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
     print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
@@ -449,14 +449,6 @@ def _limit_figure(run, ref, nmpc, plant):
     ax_p.legend(loc="upper right", fontsize=8)
     fig.suptitle("NMPC, steps to beyond the stroke (plant with friction and lines)", fontsize=11)
     return fig
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 if __name__ == "__main__":

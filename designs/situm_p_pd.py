@@ -373,7 +373,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "validation_p": v_p.to_dict(), "validation_pd": v_pd.to_dict(),
                    "arx_poles": [[float(z.real), float(z.imag)] for z in arx_poles],
                    "pct_poles": [[float(z.real), float(z.imag)] for z in pct_poles]}
-        atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=_json_default) + "\n")
+        atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=rp.json_default) + "\n")
     print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
@@ -387,16 +387,6 @@ def _arx_step(a, b, n):
         acc -= sum(a[j] * y[k - j] for j in range(1, len(a)) if k - j >= 0)
         y[k] = acc
     return y
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, float) and not np.isfinite(o):
-        return None
-    return str(o)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from typing import Callable
 from .output import write_failure
 from .provenance import provenance
 
-__all__ = ["step", "run_design"]
+__all__ = ["step", "run_design", "json_default"]
 
 
 class step:
@@ -58,3 +58,16 @@ def run_design(title: str, out: str | Path, plant_file: str | Path | None,
         print(f"design FAILED at step '{name}': {exc}\n  report: {out / 'report.html'}",
               file=sys.stderr)
         return 1
+
+
+def json_default(o):
+    """``json.dumps(default=...)`` for NumPy scalars and arrays in design summaries."""
+    import numpy as np
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, (np.floating, np.integer)):
+        value = o.item()
+        return None if isinstance(value, float) and not np.isfinite(value) else value
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
