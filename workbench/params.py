@@ -589,6 +589,21 @@ def _check_valve_law(values: Mapping[str, Any], source: str) -> None:
                     source=source, location=_fmt_path(key.path))
 
 
+def usual_permissions(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """mkstemp makes files private (0600); give ``tmp`` the mode of the file it
+    replaces, or 0644 less the umask for a new one."""
+    try:
+        if os.path.exists(path):
+            mode = os.stat(path).st_mode & 0o777
+        else:
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o644 & ~umask
+        os.chmod(tmp, mode)
+    except OSError:
+        pass
+
+
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``path`` so that readers see the old or the new file, never half."""
     path = Path(path)
@@ -597,6 +612,7 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
+        usual_permissions(tmp, path)
         os.replace(tmp, path)
     except BaseException:
         try:

@@ -9,6 +9,7 @@ import traceback
 from pathlib import Path
 from typing import Sequence
 
+from ..params import usual_permissions
 from .document import Paragraph, Preformatted, Report, ReportError, Section, Status
 from .html import render_html
 from .pdf import render_pdf
@@ -90,6 +91,7 @@ def write(report: Report, out_dir: str | os.PathLike, stem: str = "report") -> t
                 fh.flush()
                 os.fsync(fh.fileno())
         for (target, _), tmp in zip(targets, temps):
+            usual_permissions(tmp, target)
             os.replace(tmp, target)
     except OSError as exc:
         raise ReportError(f"cannot write the report into {str(out)!r}: "
