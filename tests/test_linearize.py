@@ -121,3 +121,17 @@ def test_valve_gain_at_the_centre_matches_central_differences():
     fd = (fp - fm) / (2 * h)
     # piecewise-smooth: the central difference is exact up to O(h) curvature terms
     np.testing.assert_allclose(lin.B[:, 0], fd, rtol=1e-5, atol=1e-9 * np.abs(fd).max())
+
+
+def test_supply_droop_equilibrium_has_physical_pressures():
+    """A closed-centre valve leaves the chamber pressure level undetermined in the real
+    model; the refinement must stay at the pinned (centre balance) level instead of
+    drifting. Regression: a supply-droop plant came out at 80 bar in a 6 bar supply."""
+    from workbench import Plant, linearize
+    plant = Plant.from_toml("designs/plants/rig25_mpye.toml").with_params(
+        **{"supply.reservoir_volume": 7e-4, "supply.regulator_conductance": 4.6e-9})
+    op = linearize.operating_point(plant, 0.2)
+    p_atm, p_s = plant.params["gas.atmospheric_pressure"], plant.params["supply.pressure"]
+    assert p_atm < op.p_a < p_s and p_atm < op.p_b < p_s
+    # no flow at rest, so the reservoir sits at the regulator's set pressure
+    assert dict(zip(op.state_names, op.state))["p_s"] == pytest.approx(p_s, rel=1e-9)

@@ -131,13 +131,21 @@ def operating_point(plant: Plant, x: float, p: Sequence[float] | None = None,
     for j, i in enumerate(free):
         full[i] = z[j] * xs[j]
     u_sym = center + z[-1] * span
+    anchor = ca.SX.sym("anchor", z.numel())
+
     def residual_function(fun_x):
+        """Scaled xdot rows, then weak rows: u towards the centre and every unknown
+        towards ``anchor`` (the pinned solution), so that directions the real model
+        leaves undetermined (closed centre: the pressure level) stay where the
+        pinned model put them instead of drifting to nonsense."""
         xdot = fun_x(ca.vertcat(*full), u_sym, pv)
-        res = ca.vertcat(*[xdot[i] / fs[k] for k, i in enumerate(eqs)], 1e-6 * z[-1])
-        return ca.Function("res", [z], [res, ca.jacobian(res, z)])
+        res = ca.vertcat(*[xdot[i] / fs[k] for k, i in enumerate(eqs)], 1e-6 * z[-1],
+                         1e-8 * (z[:-1] - anchor[:-1]))
+        fun = ca.Function("res", [z, anchor], [res, ca.jacobian(res, z)])
+        return lambda zz, ref=None: fun(zz, zz if ref is None else ref)
 
     rf = residual_function(f_reg)
-    rf_real = residual_function(model.f)
+    rf_real_anchored = residual_function(model.f)
 
     p_e = centre_balance_pressure(prm["supply.pressure"], prm["gas.atmospheric_pressure"],
                                   prm["valve.critical_pressure_ratio"], prm["gas.temperature"])
@@ -155,11 +163,13 @@ def operating_point(plant: Plant, x: float, p: Sequence[float] | None = None,
     if u_guess is not None:
         guess[-1] = (u_guess - center) / span
 
+    n_eq = len(eqs)
+
     def solve(resfun, start):
         sol = optimize.least_squares(lambda zz: np.asarray(resfun(zz)[0]).ravel(), start,
                                      jac=lambda zz: np.asarray(resfun(zz)[1]), method="lm",
                                      xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
-        return sol.x, float(np.max(np.abs(np.asarray(resfun(sol.x)[0]).ravel()[:-1])))
+        return sol.x, float(np.max(np.abs(np.asarray(resfun(sol.x)[0]).ravel()[:n_eq])))
 
     # 1) the pinned model: well posed even for a closed centre without leakage
     zz, _ = solve(rf, guess)
@@ -168,14 +178,15 @@ def operating_point(plant: Plant, x: float, p: Sequence[float] | None = None,
     #    from the pinned one and this step moves to it.
     #    A leak-dominated closed centre settles far away (at atmosphere), so a
     #    second start there is tried as well; the smaller residual wins.
-    zz_real, resid = solve(rf_real, zz)
+    pinned = zz.copy()
+    zz_real, resid = solve(lambda q: rf_real_anchored(q, pinned), zz)
     if resid > 1e-9:
         start = zz.copy()
         for j, i in enumerate(free):
             nm = names[i]
             if nm in ("p_a", "p_b") or nm.startswith("line_a_p") or nm.startswith("line_b_p"):
                 start[j] = prm["gas.atmospheric_pressure"] / xs[j]
-        zz_alt, resid_alt = solve(rf_real, start)
+        zz_alt, resid_alt = solve(lambda q, a=start.copy(): rf_real_anchored(q, a), start)
         if resid_alt < resid:
             zz_real, resid = zz_alt, resid_alt
     if np.all(np.isfinite(zz_real)):
