@@ -12,7 +12,8 @@ from .plant import Plant
 __version__ = "0.1.0"
 
 #: Sub-packages imported on first use (they pull in reportlab, dask, matplotlib...).
-_LAZY = ("stability", "validate", "report", "identify", "diagnose", "plots", "recording")
+_LAZY = ("stability", "validate", "report", "identify", "diagnose", "plots", "recording",
+         "robustness")
 
 __all__ = [
     "InputError", "WorkbenchError", "Plant", "PlantParams",
