@@ -73,6 +73,7 @@ class RobustnessResult:
     passed: Mapping[str, tuple[bool, ...]]
     failed_checks: Mapping[str, tuple[tuple[str, ...], ...]]
     seed: int
+    first_error: Mapping[str, str] = None
 
     def pass_rate(self, name: str) -> float:
         return float(np.mean(self.passed[name]))
@@ -101,14 +102,18 @@ def monte_carlo(plant: Plant, controllers: Mapping[str, Callable[[Plant], object
     draws = draw_plants(plant, n, seed, uncertainty)
     passed = {k: [] for k in controllers}
     failed = {k: [] for k in controllers}
+    errors: dict[str, str] = {}
     bar = tqdm(total=n * len(controllers), desc="robustness", disable=not progress, leave=False)
     for _, p in draws:
         for name, make in controllers.items():
-            v = validate(p, make(p), spec=spec, reference=ref, progress=False, output_step=None)
+            v = validate(p, make(p), spec=spec, reference=ref, progress=False)
             passed[name].append(bool(v.passed))
             failed[name].append(tuple(c.name for c in v.failed))
+            if v.error:
+                errors.setdefault(name, v.error)
             bar.update()
     bar.close()
     return RobustnessResult(draws=tuple(d for d, _ in draws),
                             passed={k: tuple(v) for k, v in passed.items()},
-                            failed_checks={k: tuple(v) for k, v in failed.items()}, seed=seed)
+                            failed_checks={k: tuple(v) for k, v in failed.items()}, seed=seed,
+                            first_error=errors)
