@@ -124,7 +124,12 @@ def metrics_row(v: validate.Validation) -> dict:
 
 def _design(args, out: Path, done: list, t_start: float) -> int:
     quick = args.quick
-    FIG_DPI["value"] = 60 if quick else 170
+    # figure resolution: lower in quick mode, where rendering dominates a smoke run
+    dpi = 60 if quick else 170
+
+    def _figure(fig, caption: str):
+        return rp.Figure(fig, caption, dpi=dpi)
+
     with rp.step("load plants"):
         rig = Plant.from_toml(PLANT)
         prm = rig.params
@@ -444,14 +449,6 @@ def _tracking_figure(run, tk, xr, err, ref):
         ax.grid(True, alpha=0.3)
     fig.suptitle("FL on the nominal affine plant: tracking of the reference model", fontsize=11)
     return fig
-
-
-#: Resolution of the report figures (lower in quick mode: rendering dominates a smoke run).
-FIG_DPI = {"value": 170}
-
-
-def _figure(fig, caption: str):
-    return rp.Figure(fig, caption, dpi=FIG_DPI["value"])
 
 
 if __name__ == "__main__":

@@ -102,7 +102,11 @@ def force_metrics(run, profile) -> dict:
 
 def _design(args, out: Path, done: list, t_start: float) -> int:
     quick = args.quick
-    FIG_DPI["value"] = 60 if quick else 170
+    # figure resolution: lower in quick mode, where rendering dominates a smoke run
+    dpi = 60 if quick else 170
+
+    def _figure(fig, caption: str):
+        return rp.Figure(fig, caption, dpi=dpi)
     profile = smooth_profile(QUICK_PROFILE if quick else PROFILE)
     duration = profile.duration
     with rp.step("plants"):
@@ -334,14 +338,6 @@ def _runs_figure(runs, profile, plan):
         ax.legend(loc="best", fontsize=7, ncol=2)
     fig.suptitle("Force tracking on the locked rod", fontsize=11)
     return fig
-
-
-#: Resolution of the report figures (lower in quick mode: rendering dominates a smoke run).
-FIG_DPI = {"value": 170}
-
-
-def _figure(fig, caption: str):
-    return rp.Figure(fig, caption, dpi=FIG_DPI["value"])
 
 
 if __name__ == "__main__":
