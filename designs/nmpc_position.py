@@ -30,14 +30,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from workbench import Plant, controllers, plots, simulate, units
+from workbench import Plant, compare, controllers, plots, simulate
 from workbench import report as rp
 from workbench import validate
 from workbench.controllers.mpc import NMPC, Recorder, prediction_model
@@ -78,51 +77,6 @@ def main(argv=None) -> int:
     return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 
 
-
-
-#: s after each step of the reference from which the error counts as "settled".
-SETTLE_WINDOW = 0.5
-
-
-def run_metrics(v: validate.Validation, plant: Plant) -> dict:
-    """Whole-run figures of one validation (SI; computed here, rendered by the report)."""
-    run = v.trajectory
-    t, x, r, u = run.time, run["x"], run["r"], run["u"]
-    dt = np.diff(t)
-    e = np.abs(r - x)
-    settled = np.ones_like(t, dtype=bool)
-    for m in v.segments:
-        if m.segment.kind == "step":
-            settled &= ~((t >= m.segment.start) & (t < m.segment.start + SETTLE_WINDOW))
-    q = run["q_supply"]
-    air_kg = float(np.sum(0.5 * (q[1:] + q[:-1]) * dt))
-    steps = [m for m in v.segments if m.segment.kind == "step"]
-    holds = [m for m in v.segments if m.segment.kind in ("step", "hold")]
-    # command activity: total variation of the command per second (each sample's change)
-    T = run.info.get("sample_time", 0.01)
-    k = np.round(t / T, 9)
-    at_samples = np.isclose(k, np.round(k))
-    u_s = u[at_samples]
-    duration = float(t[-1] - t[0])
-    p_all = np.concatenate([run["p_a"], run["p_b"]])
-    return {
-        "iae": v.metrics.iae,
-        "max_error": float(np.max(e)),
-        "max_error_settled": float(np.max(e[settled])),
-        "settling_time": max((m.settling_time for m in steps), default=math.nan),
-        "overshoot": max((m.overshoot for m in steps), default=math.nan),
-        "overshoot_abs": max((m.overshoot_abs for m in steps), default=math.nan),
-        "steady_state_error": max((m.steady_state_error for m in holds), default=math.nan),
-        "ramp_error": v.metrics.ramp_error_max,
-        "air_kg": air_kg,
-        "air_l_anr": air_kg / units.RHO_ANR * 1e3,
-        "command_activity": float(np.sum(np.abs(np.diff(u_s))) / duration),
-        "saturation": v.metrics.saturation_fraction,
-        "u_min": float(np.min(u)), "u_max": float(np.max(u)),
-        "p_min": float(np.min(p_all)), "p_max": float(np.max(p_all)),
-        "x_min": float(np.min(x)), "x_max": float(np.max(x)),
-        "passed": v.passed,
-    }
 
 
 def _design(args, out: Path, done: list, t_start: float) -> int:
@@ -219,7 +173,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             rp.Table(["kp", "kd", "IAE", "settled error", "overshoot", "steady-state error",
                       "validation"],
                      [[g.kp, g.kd, v.metrics.iae * 1e3,
-                       run_metrics(v, plant)["max_error_settled"] * 1e3,
+                       compare.run_figures(v)["max_error_settled"] * 1e3,
                        v.check("overshoot").value, v.check("steady-state error").value * 1e3,
                        v.passed] for g, v in grid],
                      units=["V/m", "V s/m", "mm s", "mm", "%", "mm", ""],
@@ -227,37 +181,13 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         ]))
 
     with rp.step("comparison"):
-        m_n, m_p = run_metrics(v_n, plant), run_metrics(v_p, plant)
+        m_n, m_p = compare.run_figures(v_n), compare.run_figures(v_p)
         v_n.trajectory.to_csv(out / "validation_nmpc.csv",
                               columns=("t", "u", "x", "v", "p_a", "p_b", "q_supply", "r"))
         v_p.trajectory.to_csv(out / "validation_pd.csv",
                               columns=("t", "u", "x", "v", "p_a", "p_b", "q_supply", "r"))
 
-        def ratio(a, b):
-            return a / b if (b and math.isfinite(a) and math.isfinite(b)) else None
-
-        rows = [
-            ["IAE (integral of |r - x|)", m_n["iae"] * 1e3, m_p["iae"] * 1e3, "mm s",
-             ratio(m_p["iae"], m_n["iae"])],
-            ["largest |r - x| (the step sizes)", m_n["max_error"] * 1e3, m_p["max_error"] * 1e3,
-             "mm", ratio(m_p["max_error"], m_n["max_error"])],
-            [f"largest |r - x| except {SETTLE_WINDOW:g} s after each step",
-             m_n["max_error_settled"] * 1e3, m_p["max_error_settled"] * 1e3, "mm",
-             ratio(m_p["max_error_settled"], m_n["max_error_settled"])],
-            ["worst settling time", m_n["settling_time"], m_p["settling_time"], "s",
-             ratio(m_p["settling_time"], m_n["settling_time"])],
-            ["worst overshoot", m_n["overshoot"], m_p["overshoot"], "%", None],
-            ["worst steady-state error", m_n["steady_state_error"] * 1e3,
-             m_p["steady_state_error"] * 1e3, "mm",
-             ratio(m_p["steady_state_error"], m_n["steady_state_error"])],
-            ["largest ramp error", m_n["ramp_error"] * 1e3, m_p["ramp_error"] * 1e3, "mm",
-             ratio(m_p["ramp_error"], m_n["ramp_error"])],
-            ["air drawn from the supply", m_n["air_l_anr"], m_p["air_l_anr"], "l ANR",
-             ratio(m_p["air_l_anr"], m_n["air_l_anr"])],
-            ["command activity (sum |u_k - u_k-1| per s)", m_n["command_activity"],
-             m_p["command_activity"], "V/s", ratio(m_p["command_activity"], m_n["command_activity"])],
-            ["time at a command limit", 100 * m_n["saturation"], 100 * m_p["saturation"], "%", None],
-        ]
+        head, rows = compare.comparison_rows({"NMPC": m_n, "PD": m_p}, baseline="PD")
         beats_iae = m_n["iae"] < m_p["iae"]
         done.append(rp.Section("NMPC vs PD on the validation plant", [
             rp.Paragraph("Both loops run on the full plant (friction, lines) over the standard "
@@ -265,8 +195,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                          "0.1 m/s, holds. The last column is PD / NMPC: above 1, the NMPC is "
                          "better by that factor (for air and command activity: the NMPC uses "
                          "less)."),
-            rp.Table(["quantity", "NMPC", "PD", "unit", "PD / NMPC"],
-                     [[q, a, b, unit, f] for q, a, b, unit, f in rows],
+            rp.Table(head, rows,
                      caption=f"NMPC vs PD (kp = {pd.kp:g} V/m, kd = {pd.kd:g} V s/m)"),
             rp.Figure(plots.compare_figure([v_n, v_p], ["NMPC", "PD"],
                                            title="NMPC vs PD on the plant with friction and lines"),
@@ -380,7 +309,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                 ("design verdict", "PASS" if design_ok else "FAIL"),
                 ("IAE NMPC / PD", f"{m_n['iae'] * 1e3:.2f} / {m_p['iae'] * 1e3:.2f} mm s "
                                   f"(PD / NMPC = {factor:.2f})"),
-                (f"largest error except {SETTLE_WINDOW:g} s after steps, NMPC / PD",
+                (f"largest error except {compare.SETTLE_WINDOW:g} s after steps, NMPC / PD",
                  f"{m_n['max_error_settled'] * 1e3:.2f} / {m_p['max_error_settled'] * 1e3:.2f} mm"),
                 ("validation NMPC", "pass" if v_n.passed else
                  "FAIL: " + ", ".join(c.name for c in v_n.failed)),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from workbench import Plant
@@ -44,3 +45,70 @@ def test_pass_rates_separate_a_sound_and_an_unstable_controller():
     assert res.pass_rate("P kp=200") == 0.0
     rows = {r[0]: r for r in res.table()}
     assert rows["P kp=200"][3] != ""                           # names what failed
+
+
+def test_paper_002_flow_factor_scales_the_flow_term_kappa_c():
+    """Mode 'flow': the drawn factor multiplies kappa C, whatever kappa was drawn."""
+    from workbench.robustness import PAPER_002_UNCERTAINTY
+    plant = Plant.from_toml(PLANT)
+    k0, c0 = plant.params["gas.polytropic_index"], plant.params["valve.sonic_conductance"]
+    draws = draw_plants(plant, 50, seed=3, uncertainty=PAPER_002_UNCERTAINTY)
+    rng = np.random.default_rng(3).random((50, 4))       # the same uniform draws
+    for (d, p), u in zip(draws, rng):
+        g = 0.075 + (1.3297 - 0.075) * u[1]
+        kappa = 1.0 + 0.3997 * u[0]
+        assert d["gas.polytropic_index"] == pytest.approx(kappa, rel=1e-15)
+        assert kappa * d["valve.sonic_conductance"] == pytest.approx(g * k0 * c0, rel=1e-12)
+        assert p.params["valve.sonic_conductance"] == d["valve.sonic_conductance"]
+    with pytest.raises(InputError):
+        Uncertainty("load.mass", 0.5, 2.0, "flow")           # flow is for the conductance
+    with pytest.raises(InputError):
+        Uncertainty("load.mass", 0.0, 2.0, "factor")         # a factor must be > 0
+    with pytest.raises(InputError):
+        draw_plants(plant, 2, uncertainty=(Uncertainty("valve.no_such_thing", 1.0, 2.0),))
+    with pytest.raises(InputError):
+        draw_plants(plant, 0)
+
+
+def test_workers_give_the_same_result_and_a_custom_judge_is_used():
+    from workbench.robustness import Outcome
+    plant = Plant.from_toml(PLANT)
+    # a judge that needs no simulation: pass when the drawn mass is below nominal;
+    # score = the drawn mass (so the order of results is checked too)
+    m0 = plant.params["load.mass"]
+
+    def judge(p, controller):
+        m = p.params["load.mass"]
+        return Outcome(m < m0 * controller, () if m < m0 * controller else ("mass",), m)
+
+    ctrls = {"strict": lambda p: 1.0, "lenient": lambda p: 3.0}
+    one = monte_carlo(plant, ctrls, n=8, seed=5, judge=judge, workers=1)
+    two = monte_carlo(plant, ctrls, n=8, seed=5, judge=judge, workers=2)
+    assert one.passed == two.passed and one.scores == two.scores
+    masses = one.drawn("load.mass")
+    assert list(one.scores["strict"]) == list(masses)
+    assert one.passed["strict"] == tuple(bool(m < m0) for m in masses)
+    assert one.pass_rate("lenient") == 1.0                  # x2 at most < x3
+    lo, hi = one.pass_interval("lenient")
+    # Wilson 95 % interval for 8/8: (0.676, 1.0)
+    assert lo == pytest.approx(0.6756, abs=1e-3) and hi == 1.0
+    rows = {r[0]: r for r in one.table()}
+    assert rows["strict"][3] == pytest.approx(float(np.median(masses)), rel=1e-15)
+    assert rows["strict"][4] == pytest.approx(float(np.max(masses)), rel=1e-15)
+    d = one.to_dict()
+    assert d["controllers"]["strict"]["passed"] == list(one.passed["strict"])
+    with pytest.raises(InputError):
+        monte_carlo(plant, ctrls, n=2, judge=judge, spec=object())
+
+
+def test_a_design_that_cannot_be_built_fails_its_draw_instead_of_stopping_the_run():
+    from workbench.robustness import Outcome
+    plant = Plant.from_toml(PLANT)
+
+    def boom(p):
+        raise RuntimeError("no solution on this rig")
+
+    res = monte_carlo(plant, {"boom": boom}, n=2, seed=0,
+                      judge=lambda p, c: Outcome(True), workers=1)
+    assert res.passed["boom"] == (False, False)
+    assert "no solution" in res.first_error["boom"]
