@@ -84,3 +84,11 @@ def test_comparison_rows_ratio_and_bad_input():
         compare.comparison_rows({"a": a}, keys=["nonsense"])
     with pytest.raises(InputError):
         compare.comparison_rows({})
+
+
+def test_no_ratio_below_a_figures_resolution():
+    a = {k: 1.0 for k, *_ in compare.FIGURES}
+    b = dict(a, overshoot=1e-8)                       # numerically zero overshoot, %
+    _, rows = compare.comparison_rows({"PD": a, "NMPC": b}, baseline="PD", keys=["overshoot", "iae"])
+    assert rows[0][-1] is None                         # 1 / 1e-8 would say nothing
+    assert rows[1][-1] == 1.0

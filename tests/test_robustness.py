@@ -44,7 +44,7 @@ def test_pass_rates_separate_a_sound_and_an_unstable_controller():
     assert res.pass_rate("P kp=10") == 1.0
     assert res.pass_rate("P kp=200") == 0.0
     rows = {r[0]: r for r in res.table()}
-    assert rows["P kp=200"][3] != ""                           # names what failed
+    assert rows["P kp=200"][5] != ""                           # names what failed
 
 
 def test_paper_002_flow_factor_scales_the_flow_term_kappa_c():
@@ -99,6 +99,8 @@ def test_workers_give_the_same_result_and_a_custom_judge_is_used():
     assert d["controllers"]["strict"]["passed"] == list(one.passed["strict"])
     with pytest.raises(InputError):
         monte_carlo(plant, ctrls, n=2, judge=judge, spec=object())
+    with pytest.raises(InputError):
+        one.pass_interval("nobody")
 
 
 def test_a_design_that_cannot_be_built_fails_its_draw_instead_of_stopping_the_run():

@@ -194,7 +194,7 @@ def _cmd_limits(args: argparse.Namespace) -> int:
 
 def _cmd_map(args: argparse.Namespace) -> int:
     from .plant import Plant
-    from .controllers import PID, from_plant
+    from .controllers import from_plant
     from .errors import InputError
     from .stability import maps
     from . import plots

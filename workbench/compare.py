@@ -31,7 +31,7 @@ import numpy as np
 from .errors import InputError
 from .physics.gas import RHO_ANR
 
-__all__ = ["FIGURES", "SETTLE_WINDOW", "run_figures", "comparison_rows"]
+__all__ = ["FIGURES", "RESOLUTION", "SETTLE_WINDOW", "run_figures", "comparison_rows"]
 
 #: s after each step of the reference from which the error counts as "settled".
 SETTLE_WINDOW = 0.5
@@ -50,6 +50,13 @@ FIGURES: tuple[tuple[str, str, float, str], ...] = (
     ("command_activity", "command activity (sum |u_k - u_k-1| per s)", 1.0, "V/s"),
     ("saturation", "time at a command limit", 100.0, "%"),
 )
+
+
+#: Resolution of each figure (SI): a ratio to a value below it is not shown (the ratio
+#: of two numerically-zero overshoots says nothing).
+RESOLUTION = {"iae": 1e-6, "max_error": 1e-6, "max_error_settled": 1e-6, "settling_time": 1e-3,
+              "overshoot": 1e-2, "steady_state_error": 1e-6, "ramp_error": 1e-6,
+              "air_kg": 1e-6, "air_l_anr": 1e-3, "command_activity": 1e-3, "saturation": 1e-4}
 
 
 def _finite_max(values) -> float:
@@ -126,6 +133,8 @@ def comparison_rows(figures: Mapping[str, Mapping[str, Any]], baseline: str | No
     figures : {run name: :func:`run_figures` dict}, in column order.
     baseline : a run name; adds one column per other run with baseline / run
         (> 1: that run is better by this factor; all figures are lower-is-better).
+        A ratio is left empty (None) when either value is below the figure's
+        :data:`RESOLUTION` or not finite.
     keys : which figures (default all of :data:`FIGURES`).
 
     Returns
@@ -150,6 +159,8 @@ def comparison_rows(figures: Mapping[str, Mapping[str, Any]], baseline: str | No
         row = [lab, unit] + [float(figures[n][k]) * f for n in names]
         for n in others:
             b, o = float(figures[baseline][k]), float(figures[n][k])
-            row.append(b / o if o > 0 and math.isfinite(b) and math.isfinite(o) else None)
+            ok = (math.isfinite(b) and math.isfinite(o) and o >= RESOLUTION[k]
+                  and b >= RESOLUTION[k])
+            row.append(b / o if ok else None)
         rows.append(row)
     return header, rows

@@ -338,7 +338,6 @@ def reduced_position_model(lin: TangentModel, output: str = "x") -> PositionMode
         deadband at the centre).
     """
     ev = lin.eigenvalues
-    mags = np.abs(ev)
     osc = [e for e in ev if abs(e.imag) > 1e-6 and abs(e) > 1e-6]
     nonzero = [e for e in ev if abs(e) > 1e-6]
     if osc:

@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["replay_figure", "trajectory_figure", "save_figure", "validation_figure",
-           "compare_figure", "stability_map_figure", "pole_step_figure"]
+           "compare_figure", "stability_map_figure", "pole_step_figure", "robustness_figure"]
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> None:
@@ -297,6 +297,66 @@ def pole_step_figure(poles: Mapping[str, np.ndarray], t: np.ndarray,
     ax_s.set_title("closed-loop unit-step responses", fontsize=10)
     ax_s.grid(True, alpha=0.3)
     ax_s.legend(fontsize=8, loc="lower right")
+    if title:
+        fig.suptitle(title, fontsize=11)
+    return fig
+
+
+def robustness_figure(result, x: np.ndarray, y: np.ndarray, xlabel: str, ylabel: str,
+                      title: str = "", score_label: str = "IAE [mm s]", score_scale: float = 1e3):
+    """Monte Carlo outcome (:class:`workbench.robustness.RobustnessResult`) per draw.
+
+    Top row, one panel per controller: the draws in the (``x``, ``y``) plane (e.g.
+    flow factor, mass factor), a green circle where it passed, a red cross where it
+    failed. Bottom: each controller's score (scaled by ``score_scale``) against ``x``,
+    filled where it passed, hollow where it failed (log axis when the scores span
+    more than a decade).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    names = list(result.passed)
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if len(x) != len(result.draws) or len(y) != len(result.draws):
+        raise ValueError(f"give one x and y per draw ({len(result.draws)}), "
+                         f"got {len(x)} and {len(y)}")
+    n = len(names)
+    fig = plt.figure(figsize=(max(8.5, 2.9 * n), 7.0), constrained_layout=True)
+    gs = fig.add_gridspec(2, n, height_ratios=[1.0, 1.1])
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    first = None
+    for j, name in enumerate(names):
+        ax = fig.add_subplot(gs[0, j], sharex=first, sharey=first)
+        first = first or ax
+        ok = np.array(result.passed[name], dtype=bool)
+        ax.scatter(x[ok], y[ok], marker="o", s=28, facecolors="none", edgecolors="tab:green",
+                   label="pass")
+        ax.scatter(x[~ok], y[~ok], marker="x", s=28, color="tab:red", label="fail")
+        ax.set_title(f"{name}: {ok.mean():.0%} pass", fontsize=10)
+        ax.set_xlabel(xlabel)
+        if j == 0:
+            ax.set_ylabel(ylabel)
+            ax.legend(loc="best", fontsize=8)
+        ax.grid(True, alpha=0.3)
+    ax = fig.add_subplot(gs[1, :])
+    all_scores = []
+    for j, name in enumerate(names):
+        s = np.array(result.scores.get(name, [np.nan] * len(x)), dtype=float) * score_scale
+        ok = np.array(result.passed[name], dtype=bool)
+        c = colors[j % len(colors)]
+        order = np.argsort(x)
+        ax.plot(x[order], s[order], color=c, lw=0.8, alpha=0.5)
+        ax.scatter(x[ok], s[ok], color=c, s=26, label=f"{name} pass")
+        ax.scatter(x[~ok], s[~ok], facecolors="none", edgecolors=c, s=26, label=f"{name} fail")
+        all_scores.extend(s[np.isfinite(s)])
+    pos = [v for v in all_scores if v > 0]
+    if pos and max(pos) / min(pos) > 10.0:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(score_label)
+    ax.grid(True, alpha=0.3, which="both")
+    ax.legend(loc="best", fontsize=8, ncol=max(1, n))
     if title:
         fig.suptitle(title, fontsize=11)
     return fig

@@ -175,14 +175,18 @@ class RobustnessResult:
     scores: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     uncertainty: tuple[Uncertainty, ...] = DEFAULT_UNCERTAINTY
 
-    def pass_rate(self, name: str) -> float:
+    def _known(self, name: str) -> None:
         if name not in self.passed:
             raise InputError(f"no controller {name!r}; have {', '.join(self.passed)}")
+
+    def pass_rate(self, name: str) -> float:
+        self._known(name)
         return float(np.mean(self.passed[name]))
 
     def pass_interval(self, name: str, z: float = 1.96) -> tuple[float, float]:
         """Wilson score interval of the pass rate (default 95 %): how sure the rate is
         from this many draws."""
+        self._known(name)
         k, n = float(np.sum(self.passed[name])), len(self.passed[name])
         p = k / n
         den = 1.0 + z * z / n
@@ -213,6 +217,14 @@ class RobustnessResult:
             raise InputError(f"{key!r} was not drawn; drawn: {', '.join(self.draws[0])}")
         return np.array([d[key] for d in self.draws], dtype=float)
 
+    def flow_factors(self, plant: Plant) -> np.ndarray:
+        """Each draw's factor on the valve-flow term kappa C relative to ``plant``'s
+        (paper 002's bound parameter); parameters not drawn keep ``plant``'s values."""
+        k0 = float(plant.params["gas.polytropic_index"])
+        c0 = float(plant.params["valve.sonic_conductance"])
+        return np.array([d.get("gas.polytropic_index", k0) * d.get("valve.sonic_conductance", c0)
+                         / (k0 * c0) for d in self.draws], dtype=float)
+
     def to_dict(self) -> dict:
         return {"seed": self.seed,
                 "uncertainty": [{"key": u.key, "low": u.low, "high": u.high, "mode": u.mode}
@@ -221,7 +233,8 @@ class RobustnessResult:
                 "controllers": {name: {"pass_rate": self.pass_rate(name),
                                        "passed": list(self.passed[name]),
                                        "failed_checks": [list(c) for c in self.failed_checks[name]],
-                                       "scores": list(self.scores.get(name, ())),
+                                       "scores": [float(v) if math.isfinite(v) else None
+                                                  for v in self.scores.get(name, ())],
                                        "first_error": self.first_error.get(name)}
                                 for name in self.passed}}
 
@@ -233,11 +246,17 @@ _JOBS: dict = {}
 def _run_one(i: int, name: str) -> Outcome:
     plants, controllers, judge = _JOBS["plants"], _JOBS["controllers"], _JOBS["judge"]
     try:
-        return judge(plants[i], controllers[name](plants[i]))
+        controller = controllers[name](plants[i])
     except InputError:
         raise
     except Exception as exc:          # a design that cannot be built on this draw fails it
         return Outcome(False, ("design",), math.nan, f"{type(exc).__name__}: {exc}")
+    try:
+        return judge(plants[i], controller)
+    except InputError:
+        raise
+    except Exception as exc:          # a run the judge could not finish fails the draw
+        return Outcome(False, ("run",), math.nan, f"{type(exc).__name__}: {exc}")
 
 
 def monte_carlo(plant: Plant, controllers: Mapping[str, Callable[[Plant], object]], n: int = 20,

@@ -33,7 +33,6 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import casadi as ca
 import numpy as np
