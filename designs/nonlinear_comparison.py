@@ -34,8 +34,6 @@ Usage: python designs/nonlinear_comparison.py [--quick] [--draws N] [--workers N
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
 import sys
 import time
@@ -97,24 +95,6 @@ def main(argv=None) -> int:
 def _fmt_rate(res, name: str) -> str:
     lo, hi = res.pass_interval(name)
     return f"{res.pass_rate(name):.0%} ({lo:.0%} .. {hi:.0%})"
-
-
-def _draws_csv(res, plant: Plant) -> str:
-    """One row per draw: drawn values, flow factor, then pass and IAE per controller."""
-    keys = list(res.draws[0])
-    names = list(res.passed)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["draw", *keys, "flow_factor"]
-               + [f"{n}_{c}" for n in names for c in ("passed", "iae_m_s", "failed")])
-    ff = res.flow_factors(plant)
-    for i, d in enumerate(res.draws):
-        row = [i, *(repr(d[k]) for k in keys), repr(float(ff[i]))]
-        for n in names:
-            row += [int(res.passed[n][i]), repr(float(res.scores[n][i])),
-                    ";".join(res.failed_checks[n][i])]
-        w.writerow(row)
-    return buf.getvalue()
 
 
 def _design(args, out: Path, done: list, t_start: float) -> int:
@@ -288,7 +268,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             print(f"    Monte Carlo, {label}: "
                   + ", ".join(f"{n} {res.pass_rate(n):.0%}" for n in res.passed)
                   + f" ({time.perf_counter() - t0:.0f} s)")
-            atomic_write_text(out / f"robustness_{key}.csv", _draws_csv(res, rig))
+            atomic_write_text(out / f"robustness_{key}.csv", res.to_csv_text(rig))
             rows = [[name, _fmt_rate(res, name), runs_, med * 1e3, mx * 1e3, worst or "-"]
                     for name, _, runs_, med, mx, worst in res.table()]
             ff = res.flow_factors(rig)

@@ -114,3 +114,27 @@ def test_a_design_that_cannot_be_built_fails_its_draw_instead_of_stopping_the_ru
                       judge=lambda p, c: Outcome(True), workers=1)
     assert res.passed["boom"] == (False, False)
     assert "no solution" in res.first_error["boom"]
+
+
+def test_cli_writes_csv_json_and_figure_and_refuses_bad_ranges(tmp_path, capsys):
+    import csv
+    import json
+    from workbench.__main__ import main
+    rc = main(["robustness", PLANT, "--draws", "2", "--seed", "4", "--workers", "1",
+               "--vary", "load.mass=0.8:1.2", "--out", str(tmp_path), "--json"])
+    assert rc == 0
+    printed = json.loads(capsys.readouterr().out)
+    rows = list(csv.DictReader((tmp_path / "robustness.csv").open()))
+    assert len(rows) == 2 and (tmp_path / "robustness.png").stat().st_size > 10_000
+    on_disk = json.loads((tmp_path / "robustness.json").read_text())
+    assert on_disk["draws"] == printed["draws"]
+    for row, d in zip(rows, printed["draws"]):
+        assert float(row["load.mass"]) == d["load.mass"]
+        assert 0.8 * 0.91 <= d["load.mass"] <= 1.2 * 0.91        # the plant's mass is 0.91 kg
+        assert float(row["flow_factor"]) == 1.0                  # neither kappa nor C drawn
+    lo, hi = printed["controllers"]["p"]["pass_interval"]
+    assert 0.0 <= lo <= printed["controllers"]["p"]["pass_rate"] <= hi <= 1.0
+    for bad in (["--vary", "load.mass"], ["--vary", "load.mass=a:b"], ["--draws", "0"],
+                ["--vary", "no.such=1:2"]):
+        assert main(["robustness", PLANT, *bad]) == 2
+        assert "error" in capsys.readouterr().err

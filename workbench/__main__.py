@@ -488,6 +488,7 @@ def build_parser() -> argparse.ArgumentParser:
         importlib.import_module("workbench.diagnose.cli").add_cli(sub)
     except (ImportError, AttributeError):
         pass                    # diagnosis not (yet) built
+    importlib.import_module("workbench.robustness").add_cli(sub)
 
     b = sub.add_parser("bench", help="run a benchmark and print ratios",
                        description="Benchmarks measure against a baseline in the same run and "
