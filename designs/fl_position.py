@@ -83,6 +83,14 @@ def main(argv=None) -> int:
 
 
 
+def load_plants(quick: bool = False) -> tuple[Plant, Plant]:
+    """The rig's nominal model and the full plant (rig + :data:`EFFECTS`); quick mode
+    lumps each line into one segment."""
+    rig = Plant.from_toml(PLANT)
+    eff = dict(EFFECTS, **({"lines.segments": 1} if quick else {}))
+    return rig, rig.with_params(**eff)
+
+
 def step_tracking(run, fl, reference, x0: float):
     """Per-step error of a run against the FL's reference model.
 
@@ -109,13 +117,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         return rp.Figure(fig, caption, dpi=dpi)
 
     with rp.step("load plants"):
-        rig = Plant.from_toml(PLANT)
+        rig, full = load_plants(quick)
         prm = rig.params
         T = prm["controller.sample_time"]
-        eff = dict(EFFECTS)
-        if quick:
-            eff["lines.segments"] = 1
-        full = rig.with_params(**eff)
         affine = Plant.from_toml(AFFINE_PLANT)
         done.append(rp.Section("Plant and scenario", [
             rp.Paragraph(

@@ -48,7 +48,7 @@ if str(HERE) not in sys.path:                 # the sibling design scripts own t
 import fl_position  # noqa: E402
 import nmpc_position  # noqa: E402
 
-from workbench import Plant, compare, plots  # noqa: E402
+from workbench import compare, plots  # noqa: E402
 from workbench import report as rp  # noqa: E402
 from workbench import validate  # noqa: E402
 from workbench.controllers import PID  # noqa: E402
@@ -106,13 +106,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         return rp.Figure(fig, caption, dpi=dpi)
 
     with rp.step("plants"):
-        rig = Plant.from_toml(PLANT)
+        rig, full = fl_position.load_plants(quick)
         prm = rig.params
         T = prm["controller.sample_time"]
-        eff = dict(EFFECTS)
-        if quick:
-            eff["lines.segments"] = 1
-        full = rig.with_params(**eff)
         done.append(rp.Section("Plant and scenario", [
             rp.Paragraph(
                 "The 25 mm rodless rig of the plant file (500 mm stroke, 1.2 kg, MPYE-size "
