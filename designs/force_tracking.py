@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench import Plant, simulate
+from workbench import Plant, plots, simulate
 from workbench import report as rp
 from workbench.controllers.force import (PLAN_RULES, DriveModel, force_tracker,
                                          pressure_plan, smooth_profile)
@@ -251,7 +251,8 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                       "air drawn", "command mismatch a/b", "one 5/3 valve", "feasible"],
                      rows, units=["", "bar", "bar", "bar", "bar", "g/s", "g", "V", "", ""],
                      caption="Pressure plans for the force profile at the lock position"),
-            _figure(_plan_figure(plans, profile), "Force profile and the planned chamber "
+            _figure(plots.pressure_plan_figure(plans, [("force [N]", tp, profile(tp), "force F*")],
+                                                title="Pressure-trajectory inversion: plans for the force profile"), "Force profile and the planned chamber "
                                                     "pressures and commands of the three rules"),
         ]))
 
@@ -534,31 +535,6 @@ def _robustness_figure(mc, prm, rms_bound):
     labels += ["passed", "failed", "RMS bound"]
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=7)
     fig.suptitle("Monte Carlo: RMS force error per drawn rig", fontsize=11)
-    return fig
-
-
-def _plan_figure(plans, profile):
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9.0, 8.0), constrained_layout=True)
-    ax_f, ax_p, ax_u = axes
-    t = next(iter(plans.values())).time
-    ax_f.plot(t, profile(t), "k", lw=1.2, label="force F*")
-    ax_f.set_ylabel("force [N]")
-    colors = {"mean": "tab:blue", "min_air": "tab:green", "single_valve": "tab:red"}
-    for rule, plan in plans.items():
-        c = colors.get(rule, None)
-        ax_p.plot(plan.time, plan.p_a / 1e5, color=c, lw=1.1, label=f"p_a {rule}")
-        ax_p.plot(plan.time, plan.p_b / 1e5, color=c, lw=1.1, ls="--", label=f"p_b {rule}")
-        ax_u.plot(plan.time, plan.command_a, color=c, lw=1.0, label=f"u port A {rule}")
-        if rule != "single_valve":
-            ax_u.plot(plan.time, plan.command_b, color=c, lw=1.0, ls=":", label=f"u port B {rule}")
-    ax_p.set_ylabel("pressure [bar abs]")
-    ax_u.set_ylabel("command [V]")
-    ax_u.set_xlabel("time t [s]")
-    for ax in axes:
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=7, ncol=3)
-    fig.suptitle("Pressure-trajectory inversion: plans for the force profile", fontsize=11)
     return fig
 
 

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench import Plant, simulate
+from workbench import Plant, plots, simulate
 from workbench import report as rp
 from workbench.controllers.force import PLAN_RULES, DriveModel, motion_force, pressure_plan
 from workbench.controllers.inversion import ValveInversion
@@ -284,7 +284,10 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                      rows, units=["", "bar", "bar", "bar", "bar", "N/mm", "N/mm", "g/s", "g",
                                   "V", "", ""],
                      caption="Pressure plans for the position trajectory"),
-            _figure(_plan_figure(plans, ref, force),
+            _figure(plots.pressure_plan_figure(
+                plans, [("position [mm]", tp, ref(tp) * 1e3, "x*"),
+                        ("force [N]", tp, force, "F = m a + beta v + F_ext")],
+                title="Pressure-trajectory inversion of the position trajectory"),
                     "Position trajectory and its force, the planned chamber pressures (solid p_a, "
                     "dashed p_b) and the commands of the three rules"),
         ]))
@@ -433,33 +436,6 @@ def _findings(mets) -> list:
             + (" (nothing corrects its drift: the model's valve law is not the plant's)"
                if ff["final_error"] > 1e-4 else " (the model is exact: the plan alone suffices)"))
     return [rp.Paragraph("; ".join(parts) + ".")] if parts else []
-
-
-def _plan_figure(plans, ref, force):
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(4, 1, sharex=True, figsize=(9.0, 10.0), constrained_layout=True)
-    ax_x, ax_f, ax_p, ax_u = axes
-    t = next(iter(plans.values())).time
-    ax_x.plot(t, ref(t) * 1e3, "k", lw=1.2, label="x*")
-    ax_x.set_ylabel("position [mm]")
-    ax_f.plot(t, force, "k", lw=1.2, label="F = m a + beta v + F_ext")
-    ax_f.set_ylabel("force [N]")
-    colors = {"mean": "tab:blue", "min_air": "tab:green", "single_valve": "tab:red"}
-    for rule, plan in plans.items():
-        c = colors.get(rule, None)
-        ax_p.plot(plan.time, plan.p_a / 1e5, color=c, lw=1.1, label=f"p_a {rule}")
-        ax_p.plot(plan.time, plan.p_b / 1e5, color=c, lw=1.1, ls="--", label=f"p_b {rule}")
-        ax_u.plot(plan.time, plan.command_a, color=c, lw=1.0, label=f"u port A {rule}")
-        if rule != "single_valve":
-            ax_u.plot(plan.time, plan.command_b, color=c, lw=1.0, ls=":", label=f"u port B {rule}")
-    ax_p.set_ylabel("pressure [bar abs]")
-    ax_u.set_ylabel("command [V]")
-    ax_u.set_xlabel("time t [s]")
-    for ax in axes:
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=7, ncol=3)
-    fig.suptitle("Pressure-trajectory inversion of the position trajectory", fontsize=11)
-    return fig
 
 
 def _runs_figure(runs, ref, plan, pname):

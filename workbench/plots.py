@@ -12,7 +12,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["replay_figure", "trajectory_figure", "save_figure", "validation_figure",
-           "compare_figure", "stability_map_figure", "pole_step_figure", "robustness_figure"]
+           "compare_figure", "stability_map_figure", "pole_step_figure", "robustness_figure",
+           "pressure_plan_figure"]
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> None:
@@ -357,6 +358,46 @@ def robustness_figure(result, x: np.ndarray, y: np.ndarray, xlabel: str, ylabel:
     ax.set_ylabel(score_label)
     ax.grid(True, alpha=0.3, which="both")
     ax.legend(loc="best", fontsize=8, ncol=max(1, n))
+    if title:
+        fig.suptitle(title, fontsize=11)
+    return fig
+
+
+_PLAN_COLORS = {"mean": "tab:blue", "min_air": "tab:green", "single_valve": "tab:red"}
+
+
+def pressure_plan_figure(plans: Mapping, leading: Sequence[tuple], title: str = ""):
+    """Pressure plans (:func:`workbench.controllers.force.pressure_plan`) by rule.
+
+    ``leading`` panels come first, each ``(ylabel, t, y, label)`` drawn in black (e.g.
+    the force profile, the position trajectory); then the chamber pressures p_a
+    (solid) and p_b (dashed) in bar abs, and the port commands in V (port B dotted,
+    except for the single-valve plan where both ports share one command).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    n = len(leading) + 2
+    fig, axes = plt.subplots(n, 1, sharex=True, figsize=(9.0, 2.5 * n + 0.5),
+                             constrained_layout=True)
+    for ax, (ylabel, t, y, label) in zip(axes, leading):
+        ax.plot(t, y, "k", lw=1.2, label=label)
+        ax.set_ylabel(ylabel)
+    ax_p, ax_u = axes[-2], axes[-1]
+    for rule, plan in plans.items():
+        c = _PLAN_COLORS.get(rule)
+        ax_p.plot(plan.time, plan.p_a / 1e5, color=c, lw=1.1, label=f"p_a {rule}")
+        ax_p.plot(plan.time, plan.p_b / 1e5, color=c, lw=1.1, ls="--", label=f"p_b {rule}")
+        ax_u.plot(plan.time, plan.command_a, color=c, lw=1.0, label=f"u port A {rule}")
+        if rule != "single_valve":
+            ax_u.plot(plan.time, plan.command_b, color=c, lw=1.0, ls=":", label=f"u port B {rule}")
+    ax_p.set_ylabel("pressure [bar abs]")
+    ax_u.set_ylabel("command [V]")
+    ax_u.set_xlabel("time t [s]")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=7, ncol=3)
     if title:
         fig.suptitle(title, fontsize=11)
     return fig
