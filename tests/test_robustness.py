@@ -138,3 +138,19 @@ def test_cli_writes_csv_json_and_figure_and_refuses_bad_ranges(tmp_path, capsys)
                 ["--vary", "no.such=1:2"]):
         assert main(["robustness", PLANT, *bad]) == 2
         assert "error" in capsys.readouterr().err
+
+
+def test_figure_axes_follow_what_was_drawn():
+    from workbench.robustness import Outcome, PAPER_002_UNCERTAINTY, _figure_axes
+    plant = Plant.from_toml(PLANT)
+    judge = lambda p, c: Outcome(True)                       # noqa: E731
+    res = monte_carlo(plant, {"c": lambda p: None}, n=3, seed=2, judge=judge,
+                      uncertainty=PAPER_002_UNCERTAINTY)
+    (x, xl), (y, yl) = _figure_axes(res, plant)
+    assert xl.startswith("flow factor") and list(x) == list(res.flow_factors(plant))
+    assert yl == "load.mass / nominal"
+    assert np.allclose(y, res.drawn("load.mass") / plant.params["load.mass"], rtol=1e-15)
+    only = monte_carlo(plant, {"c": lambda p: None}, n=3, seed=2, judge=judge,
+                       uncertainty=(Uncertainty("supply.pressure", -1e5, 1e5, "offset"),))
+    (x, xl), (y, yl) = _figure_axes(only, plant)
+    assert xl == "supply.pressure / nominal" and not y.any()

@@ -399,6 +399,26 @@ def add_cli(subparsers):
     return p
 
 
+def _figure_axes(res: RobustnessResult, plant: Plant) -> list[tuple[np.ndarray, str]]:
+    """Two axes to show the draws on: the flow factor when kappa or C was drawn, the
+    mass factor when the mass was, then the other drawn keys (relative to nominal
+    where the nominal is not zero); a constant axis when fewer than two were drawn."""
+    drawn = list(res.draws[0])
+    axes: list[tuple[np.ndarray, str]] = []
+    if {"gas.polytropic_index", "valve.sonic_conductance"} & set(drawn):
+        axes.append((res.flow_factors(plant), "flow factor kappa C / (kappa0 C0)"))
+        drawn = [k for k in drawn if k not in ("gas.polytropic_index", "valve.sonic_conductance")]
+    for key in sorted(drawn, key=lambda k: k != "load.mass"):
+        nominal = float(plant.params[key])
+        if nominal != 0.0:
+            axes.append((res.drawn(key) / nominal, f"{key} / nominal"))
+        else:
+            axes.append((res.drawn(key), key))
+    while len(axes) < 2:
+        axes.append((np.zeros(len(res.draws)), "(nothing else drawn)"))
+    return axes[:2]
+
+
 def run_cli(args) -> int:
     """Run the sub-command (user errors raise WorkbenchError: exit 2 in main)."""
     import json
@@ -425,11 +445,8 @@ def run_cli(args) -> int:
         atomic_write_text(out / "robustness.json", json.dumps(
             {"plant": str(args.plant), **res.to_dict()}, indent=1) + "\n")
         from . import plots
-        fig = plots.robustness_figure(res, res.flow_factors(plant),
-                                      res.drawn("load.mass") / plant.params["load.mass"]
-                                      if "load.mass" in res.draws[0] else np.ones(args.draws),
-                                      "flow factor kappa C / (kappa0 C0)", "mass / nominal",
-                                      title=f"Monte Carlo: {args.plant}")
+        (x, xl), (y, yl) = _figure_axes(res, plant)
+        fig = plots.robustness_figure(res, x, y, xl, yl, title=f"Monte Carlo: {args.plant}")
         plots.save_figure(fig, out / "robustness.png")
     if args.json:
         d = res.to_dict()
