@@ -181,14 +181,16 @@ class DriveModel:
         """(f0, g_plus, g_minus): dF/dt = f0 + g G with g = g_plus for G >= 0, g_minus for G < 0.
 
         G is the command characteristic on port A (port B sees -G). Units: f0 in N/s,
-        g in N/s per unit G.
+        g in N/s per unit G. The valve's authority is that of
+        :meth:`ValveInversion.authority` (never below a floor), so that the command the
+        inversion asks for keeps its direction where the law extrapolates.
         """
         p_a, p_b = _arr(p_a), _arr(p_b)
         va, vb, dva, dvb = self.volumes(x, v)
         c = self.polytropic_index
         rT = R_AIR * self.temperature
-        phi_a, in_a, out_a = self.valve.terms(p_a)
-        phi_b, in_b, out_b = self.valve.terms(p_b)
+        phi_a, in_a, out_a = self.valve.authority(p_a)
+        phi_b, in_b, out_b = self.valve.authority(p_b)
         ka = self.area_a * c / va
         kb = self.area_b * c / vb
         f0 = ka * (rT * phi_a - p_a * dva) - kb * (rT * phi_b - p_b * dvb)

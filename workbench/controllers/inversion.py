@@ -252,6 +252,11 @@ class FlowCommand:
 
 
 # ---------------------------------------------------------------------- the inversion
+#: Fraction of each psi's largest value (between atmosphere and supply) that
+#: :meth:`ValveInversion.authority` keeps as a floor when a controller inverts the law.
+AUTHORITY_FLOOR = 0.05
+
+
 @dataclass(frozen=True)
 class ValveInversion:
     """A valve law together with its inverse (see the module docstring).
@@ -391,6 +396,33 @@ class ValveInversion:
         q_in = iso6358_flow_numpy(self.conductance, self.critical_ratio, self.p_s, p, T, T)
         q_out = iso6358_flow_numpy(self.conductance, self.critical_ratio, p, self.p_atm, T, gas.T_REF)
         return np.zeros_like(p), q_in, q_out
+
+    def authority(self, p):
+        """:meth:`terms` as a controller should invert them: each psi floored at
+        :data:`AUTHORITY_FLOOR` of its largest value between atmosphere and supply.
+
+        A law describes the valve at the supply it was built for; beyond that (a rig
+        whose supply is higher than the model's, a chamber pushed above the model's
+        supply) it extrapolates, and psi_in -- zero at the model's supply -- turns
+        negative: an inversion would then open the valve the wrong way. Floored, the
+        model keeps a little authority in the right direction, so the inversion asks
+        for a large opening that way and the loop's feedback does the rest. Within the
+        range only the last few per cent near the pinned ends are affected, where the
+        valve has almost no authority anyway.
+        """
+        phi, pin, pout = self.terms(p)
+        f_in, f_out = self._authority_floors
+        return phi, np.maximum(pin, f_in), np.maximum(pout, f_out)
+
+    @property
+    def _authority_floors(self) -> tuple[float, float]:
+        cached = self.__dict__.get("_floors")
+        if cached is None:
+            grid = np.linspace(self.p_atm, self.p_s, 201)
+            _, pin, pout = self.terms(grid)
+            cached = (AUTHORITY_FLOOR * float(np.max(pin)), AUTHORITY_FLOOR * float(np.max(pout)))
+            object.__setattr__(self, "_floors", cached)
+        return cached
 
     def symbolic_terms(self, p):
         """:meth:`terms` as CasADi expressions of ``p`` (SX or MX)."""
