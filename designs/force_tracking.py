@@ -44,7 +44,7 @@ from workbench.controllers.force import (PLAN_RULES, DriveModel, force_tracker,
                                          pressure_plan, smooth_profile)
 from workbench.controllers.inversion import ValveInversion
 from workbench.errors import InputError, WorkbenchError
-from workbench.params import atomic_write_text
+from workbench.params import atomic_write_text, json_safe
 from workbench.robustness import DEFAULT_UNCERTAINTY, Outcome, monte_carlo
 
 HERE = Path(__file__).resolve().parent
@@ -448,20 +448,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                                               for (pn, c), o in mc_nominal.items()},
                                   "results": {pn: res.to_dict() for pn, res in mc.items()}}}
         atomic_write_text(out / "summary.json",
-                          json.dumps(_finite(summary), indent=1, default=rp.json_default) + "\n")
+                          json.dumps(json_safe(summary), indent=1, default=rp.json_default) + "\n")
     print(f"design {status.outcome}: {status.message}\n  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
-
-
-def _finite(obj):
-    """``obj`` with non-finite floats as None (strict JSON; a run without a score has NaN)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
 
 
 def _robustness_findings(mc, model, prm) -> list:

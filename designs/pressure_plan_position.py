@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass
@@ -40,7 +39,7 @@ from workbench import report as rp
 from workbench.controllers.force import PLAN_RULES, DriveModel, motion_force, pressure_plan
 from workbench.controllers.inversion import ValveInversion
 from workbench.errors import WorkbenchError
-from workbench.params import atomic_write_text
+from workbench.params import atomic_write_text, json_safe
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -402,20 +401,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "force_peak": float(np.max(np.abs(force))),
                    "plans": plan_sum, "metrics": mets, "errors": errors}
         atomic_write_text(out / "summary.json",
-                          json.dumps(_finite(summary), indent=1, default=rp.json_default) + "\n")
+                          json.dumps(json_safe(summary), indent=1, default=rp.json_default) + "\n")
     print(f"design {status.outcome}: {status.message}\n  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
-
-
-def _finite(obj):
-    """``obj`` with non-finite floats as None (strict JSON)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
 
 
 def _findings(mets) -> list:

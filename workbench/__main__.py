@@ -15,6 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import WorkbenchError
+from .params import json_safe
 
 __all__ = ["main", "build_parser"]
 
@@ -96,17 +97,6 @@ def _cmd_linearize(args: argparse.Namespace) -> int:
     return 0
 
 
-def _json_safe(value):
-    """inf / nan -> None (JSON has no such tokens), recursively."""
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
 def _cmd_limits(args: argparse.Namespace) -> int:
     from .errors import InputError
     from . import stability
@@ -153,7 +143,7 @@ def _cmd_limits(args: argparse.Namespace) -> int:
         out = lim.as_dict()
         if args.plant is not None:
             out = {**out, "plant": str(args.plant), "x": args.x, "notes": notes}
-        print(json.dumps(_json_safe(out), indent=2))
+        print(json.dumps(json_safe(out), indent=2))
         return 0
 
     def num(v, fmt=".4g"):

@@ -604,6 +604,18 @@ def usual_permissions(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
         pass
 
 
+def json_safe(value: Any) -> Any:
+    """``value`` with non-finite floats (inf, NaN) as None, recursively through dicts,
+    lists and tuples: JSON has no such tokens, and strict readers reject them."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``path`` so that readers see the old or the new file, never half."""
     path = Path(path)

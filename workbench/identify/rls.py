@@ -94,6 +94,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..params import json_safe
 
 if TYPE_CHECKING:  # pragma: no cover
     import casadi
@@ -269,7 +270,7 @@ class RlsResult:
             out["time"] = self.time.tolist()
             out["theta"] = self.theta.tolist()
             out["std"] = self.std.tolist()
-        return _json_safe(out)
+        return json_safe(out)
 
 
 @dataclass(frozen=True, eq=False)
@@ -306,19 +307,9 @@ class ForgettingChoice:
                              "chosen": [c == self.forgetting for c in self.candidates]})
 
     def as_dict(self) -> dict[str, Any]:
-        return _json_safe({"forgetting": self.forgetting, "burn_in": self.burn_in,
+        return json_safe({"forgetting": self.forgetting, "burn_in": self.burn_in,
                            "table": [{"forgetting": c, "mse": m, "rmse": math.sqrt(m)}
                                      for c, m in zip(self.candidates, self.mse)]})
-
-
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 # --------------------------------------------------------------------------------------
@@ -999,7 +990,7 @@ def _cmd_rls(args: argparse.Namespace) -> int:
                    title=f"RLS: {args.output} from {args.input}, orders {tuple(res.orders)}, "
                          f"lambda = {res.forgetting:g}")
         summary["files"]["plot"] = str(out / "rls.png")
-    summary = _json_safe(summary)
+    summary = json_safe(summary)
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     atomic_write_text(out / "report.md", _report_md(res, summary, choice, y_unit, u_unit))
     if args.json:
