@@ -235,6 +235,27 @@ def _demand(model: DriveModel, ref: ReferenceModel, r: np.ndarray, pressures):
     return G, force, st
 
 
+def _largest_feasible(ok, upper: float, reference_bandwidth: float | None) -> float | None:
+    """Largest bandwidth (rad/s) in (0, upper] that ``ok(error_bw, reference_bw)`` accepts.
+
+    Bisection to 0.1 % (plenty for a message); the reference model follows the error
+    bandwidth unless ``reference_bandwidth`` is fixed. None when nothing above 0 passes.
+    """
+    def ref(bw: float) -> float:
+        return bw if reference_bandwidth is None else reference_bandwidth
+
+    lo, hi = 0.0, upper
+    if ok(hi, ref(hi)):
+        return hi
+    while hi - lo > 1e-3 * hi:
+        mid = 0.5 * (lo + hi)
+        if ok(mid, ref(mid)):
+            lo = mid
+        else:
+            hi = mid
+    return lo if lo > 0 else None
+
+
 def feasibility(model: DriveModel, bandwidth: float, sample_time: float, reference,
                 pressures: tuple[float, float], damping: float = 1.0,
                 reference_bandwidth: float | None = None, margin: float = FLOW_MARGIN,
@@ -314,17 +335,8 @@ def feasibility(model: DriveModel, bandwidth: float, sample_time: float, referen
                        "the chambers can give")
     best = None
     if reasons and search:
-        lo, hi = 0.0, min(lam, limit)
-        if ok(hi, hi if reference_bandwidth is None else lam_r):
-            best = hi
-        else:
-            while hi - lo > 1e-3 * hi:          # 0.1 % is plenty for a message
-                mid = 0.5 * (lo + hi)
-                if ok(mid, mid if reference_bandwidth is None else lam_r):
-                    lo = mid
-                else:
-                    hi = mid
-            best = lo if lo > 0 else None
+        best = _largest_feasible(ok, min(lam, limit),
+                                 None if reference_bandwidth is None else lam_r)
     return Feasibility(bandwidth=lam, sample_time=T, sampling_limit=limit,
                        gamma_needed=float(abs(G[k])) if np.isfinite(G[k]) else math.inf,
                        gamma_available=float(g_hi if G[k] >= 0 else -g_lo),
