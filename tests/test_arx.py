@@ -134,7 +134,7 @@ def test_model_is_frozen_and_exports():
     assert sys.dt == T
     np.testing.assert_allclose(np.sort_complex(sys.poles()), np.sort_complex(m.poles),
                                atol=1e-9)
-    d = m.as_dict()
+    d = m.to_dict()
     json.dumps(d)  # JSON-ready
     assert d["orders"] == {"na": 4, "nb": 1, "nk": 2} and len(d["poles"]) == 4
     assert all(len(p) == 2 for p in d["poles"])
@@ -214,7 +214,7 @@ def test_true_order_residuals_pass_undermodelled_fail():
     bad = validate(fit_arx(ye, ue, (1, 1, 2), sample_time=T), yv, uv)
     assert bad.whiteness_ok is False and bad.whiteness_p_value < 1e-6
     assert bad.autocorrelation_outside > 5
-    json.dumps(good.as_dict())
+    json.dumps(good.to_dict())
 
 
 def test_validation_fit_is_nrmse_on_held_out_noise_free_data():

@@ -1,4 +1,4 @@
-"""Valve characteristic fits of paper 003 (workbench.identify.valve_fit).
+"""Valve characteristic fits of paper 003 (workbench.identify.valve).
 
 The reference valve is re-implemented here from physics.md (four ISO 6358 edges, the
 rounded underlap written out with ``math``), so equilibrium pressures and flows are
@@ -23,7 +23,7 @@ from scipy import optimize
 from workbench import Plant, PlantParams
 from workbench.__main__ import main
 from workbench.errors import InputError
-from workbench.identify import valve_fit as vf
+from workbench.identify import valve as vf
 from workbench.physics import chamber, gas, valve
 
 ROOT = Path(__file__).resolve().parents[1]
