@@ -18,9 +18,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..identify.arx import CRITERIA, ArxModel, ArxValidation, fit_arx, select_order, validate
-from ..identify.arx._checks import _num, _pairs
+from ..identify.arx.checks import complex_pairs as _pairs, finite_or_none as _num
 from ..identify.rls import DEFAULT_CANDIDATES, choose_forgetting, rls
-from ..identify.rls.estimator import _check_forgetting, _default_burn_in
+from ..identify.rls.estimator import check_forgetting, default_burn_in
 from ..identify.rls.report import report_md
 from ..identify.valve import (ValveFitReport, analyse, centre_dense_commands,
                               compare_pressure_gain, generate_valve_table, load_valve_table,
@@ -300,7 +300,7 @@ def _parse_forgetting(text: str) -> float | None:
         val = float(text)
     except ValueError:
         raise InputError(f"--forgetting must be a number in (0, 1] or 'auto', got '{text}'") from None
-    return _check_forgetting(val, "--forgetting")
+    return check_forgetting(val, "--forgetting")
 
 
 def _cmd_rls(args: argparse.Namespace) -> int:
@@ -312,7 +312,7 @@ def _cmd_rls(args: argparse.Namespace) -> int:
                              f"are {', '.join(rec.columns)}", source=str(args.recording))
     res, choice = _rls_run(args, rec)
     n_est = len(res)
-    burn = args.burn_in if args.burn_in is not None else _default_burn_in(n_est, len(res.names))
+    burn = args.burn_in if args.burn_in is not None else default_burn_in(n_est, len(res.names))
     burn = min(max(int(burn), 0), n_est - 1)
     mse = res.prediction_mse(burn)
 

@@ -9,8 +9,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from ...errors import InputError
-from ._checks import (_check_excitation, _data, _max_lag, _num, _order, _orders, _pairs,
-                      _sample_time, _vector)
+from .checks import _check_excitation, _data, _max_lag, _order, _orders, _sample_time, _vector
+from .checks import complex_pairs as _pairs, finite_or_none as _num
 
 __all__ = ["ArxModel", "fit_arx"]
 

@@ -10,8 +10,9 @@ from typing import Any, Iterable
 import numpy as np
 
 from ...errors import InputError
-from ._checks import (_check_excitation, _data, _fit_percent, _max_lag, _num, _orders, _range,
-                      _sample_time)
+from .checks import (_check_excitation, _data, _fit_percent, _max_lag, _orders, _range,
+                     _sample_time)
+from .checks import finite_or_none as _num
 from .model import ArxModel, _fit
 
 __all__ = ["CRITERIA", "OrderCandidate", "OrderSelection", "select_order"]

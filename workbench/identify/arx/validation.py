@@ -10,7 +10,8 @@ import numpy as np
 
 from ...errors import InputError
 from ..residuals import CONFIDENCE_Z99, covariances, input_independence, ljung_box
-from ._checks import _data, _fit_percent, _num, _order
+from .checks import _data, _fit_percent, _order
+from .checks import finite_or_none as _num
 from .model import ArxModel, _ro
 
 __all__ = ["ArxValidation", "validate"]

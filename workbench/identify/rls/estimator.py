@@ -168,8 +168,8 @@ class RlsResult:
             "std_a": [float(v) for v in self.std[-1, :na]],
             "std_b": [float(v) for v in self.std[-1, na:]],
             "noise_variance": float(self.noise_variance[-1]),
-            "prediction_mse": self.prediction_mse(_default_burn_in(len(self), len(self.names))),
-            "prediction_mse_burn_in": _default_burn_in(len(self), len(self.names)),
+            "prediction_mse": self.prediction_mse(default_burn_in(len(self), len(self.names))),
+            "prediction_mse_burn_in": default_burn_in(len(self), len(self.names)),
             "bound_active_fraction": self.bound_active_fraction,
             "method": self.method,
         }
@@ -239,7 +239,7 @@ def _as_signal(x: Any, what: str, sample_time: float | None = None,
     return arr
 
 
-def _check_forgetting(lam: Any, what: str = "forgetting factor lambda") -> float:
+def check_forgetting(lam: Any, what: str = "forgetting factor lambda") -> float:
     try:
         val = float(lam)
     except (TypeError, ValueError):
@@ -327,7 +327,7 @@ def regressors(y: Any, u: Any, orders: Sequence[int]) -> tuple[np.ndarray, np.nd
     return np.column_stack(cols), y[k0:].copy(), k0
 
 
-def _default_burn_in(n_estimates: int, npar: int) -> int:
+def default_burn_in(n_estimates: int, npar: int) -> int:
     return int(min(max(10 * npar, n_estimates // 10), max(n_estimates - 1, 0)))
 
 
@@ -399,7 +399,7 @@ def rls(y: Any, u: Any, orders: Sequence[int], forgetting: float = 0.99,
     ([-0.9, 0.2], 2.99)
     """
     yarr, uarr, orders, sample_time, tarr = _prepare(y, u, orders, sample_time, time)
-    lam = _check_forgetting(forgetting)
+    lam = check_forgetting(forgetting)
     if method not in _METHODS:
         raise InputError(f"method must be one of {', '.join(_METHODS)}, got {method!r}")
     na, nb, _ = orders

@@ -10,7 +10,8 @@ import numpy as np
 
 from ...errors import InputError
 from ...params import json_safe
-from .estimator import RlsResult, _check_forgetting, _default_burn_in, _prepare, _start_index, rls
+from .estimator import (RlsResult, _prepare, _start_index, check_forgetting, default_burn_in,
+                        rls)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -101,13 +102,13 @@ def choose_forgetting(y: Any, u: Any, orders: Sequence[int],
     if not cands:
         raise InputError("no candidate forgetting factors given")
     for c in cands:
-        _check_forgetting(c, "candidate forgetting factor")
+        check_forgetting(c, "candidate forgetting factor")
     yarr, uarr, ords, _, _ = _prepare(y, u, orders, kwargs.get("sample_time"),
                                       kwargs.get("time"))
     n_est = yarr.size - _start_index(ords)
     npar = ords[0] + ords[1]
     if burn_in is None:
-        burn_in = _default_burn_in(n_est, npar)
+        burn_in = default_burn_in(n_est, npar)
     burn_in = int(burn_in)
     if burn_in < 0 or n_est - burn_in < 10:
         raise InputError(f"burn-in of {burn_in} estimates leaves {n_est - burn_in} of {n_est} "

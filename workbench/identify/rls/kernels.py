@@ -1,4 +1,4 @@
-"""The RLS recursion on a packed state [theta, triu(P), triu(M), V, N_eff]: numpy and CasADi loops."""
+"""The RLS recursion on a packed state [theta, triu(P), triu(M), V, N_eff]: numpy, CasADi."""
 
 from __future__ import annotations
 

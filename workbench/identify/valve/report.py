@@ -11,7 +11,8 @@ import numpy as np
 from ...errors import InputError, WorkbenchError
 from ._numeric import numeric as _numeric
 from .affine import AffineTableFit, fit_affine
-from .gain import PressureGain, TableLaw, compare_pressure_gain, pressure_gain, pressure_gain_from_data
+from .gain import (PressureGain, TableLaw, compare_pressure_gain, pressure_gain,
+                   pressure_gain_from_data)
 from .polynomial import DegreeSelection, PolynomialValveFit, fit_polynomial, select_degrees
 from .table import ValveTable
 from .tank import TankStepTests, tank_steps

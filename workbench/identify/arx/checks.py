@@ -1,4 +1,4 @@
-"""Input checks and small conversions shared by the ARX modules."""
+"""Input checks and small JSON conversions shared by the ARX modules and their CLI."""
 
 from __future__ import annotations
 
@@ -109,10 +109,12 @@ def _fit_percent(y: np.ndarray, y_model: np.ndarray) -> float:
     return float(100.0 * (1.0 - np.linalg.norm(y - y_model) / den))
 
 
-def _num(x: Any) -> float | None:
+def finite_or_none(x: Any) -> float | None:
+    """``float(x)``, or None when it is NaN or infinite (JSON has neither)."""
     x = float(x)
     return x if math.isfinite(x) else None
 
 
-def _pairs(z: np.ndarray) -> list[list[float]]:
+def complex_pairs(z: np.ndarray) -> list[list[float]]:
+    """Complex numbers (poles, zeros) as ``[[re, im], ...]`` for JSON."""
     return [[float(v.real), float(v.imag)] for v in np.asarray(z, dtype=complex)]
