@@ -134,7 +134,7 @@ def test_model_is_frozen_and_exports():
     assert sys.dt == T
     np.testing.assert_allclose(np.sort_complex(sys.poles()), np.sort_complex(m.poles),
                                atol=1e-9)
-    d = m.as_dict()
+    d = m.to_dict()
     json.dumps(d)  # JSON-ready
     assert d["orders"] == {"na": 4, "nb": 1, "nk": 2} and len(d["poles"]) == 4
     assert all(len(p) == 2 for p in d["poles"])
@@ -214,7 +214,7 @@ def test_true_order_residuals_pass_undermodelled_fail():
     bad = validate(fit_arx(ye, ue, (1, 1, 2), sample_time=T), yv, uv)
     assert bad.whiteness_ok is False and bad.whiteness_p_value < 1e-6
     assert bad.autocorrelation_outside > 5
-    json.dumps(good.as_dict())
+    json.dumps(good.to_dict())
 
 
 def test_validation_fit_is_nrmse_on_held_out_noise_free_data():
@@ -408,3 +408,39 @@ def test_cli_errors_exit_2(recording_csv, capsys, extra, message):
     assert main(["identify", "arx", str(recording_csv), *extra]) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_residual_tests_hold_their_level_and_see_colour_and_feedthrough():
+    """identify.residuals on its own: the 1 % level on white noise, power on coloured.
+
+    Level: 300 independent white series (N = 500, M = 20) are rejected by Ljung-Box
+    at most 9 times, the 99.9 % quantile of Binomial(300, 0.01) (the chi-square
+    approximation is good at N/M = 25), and half their p-values lie below 0.5. Power: an AR(1) with pole 0.3 has r(1) = 0.3,
+    so Q is about N r(1)^2 = 45 against the 99 % point 37.6 of chi-square(20); a
+    residual that contains 0.3 u(k-2) of a white input correlates with it by about
+    0.3 at lag 2, N r^2 = 45 against chi-square(21): both must be rejected, while an
+    independent residual is not.
+    """
+    from workbench.identify.residuals import covariances, input_independence, ljung_box
+
+    rng = np.random.default_rng(11)
+    n, m = 500, 20
+    p_values, rejected = [], 0
+    for _ in range(300):
+        e = rng.standard_normal(n)
+        c_e, _, _, _ = covariances(e, rng.standard_normal(n), m)
+        _, _, p, ok = ljung_box(c_e, n)
+        p_values.append(p)
+        rejected += ok is False
+    assert rejected <= 9
+    # p-values of a calibrated test are uniform: 150 +- 3 binomial std (26) below 0.5
+    assert 124 <= np.sum(np.array(p_values) < 0.5) <= 176
+    ar = lfilter([1.0], [1.0, -0.3], rng.standard_normal(n))
+    assert ljung_box(covariances(ar, rng.standard_normal(n), m)[0], n)[3] is False
+    u = rng.standard_normal(n)
+    for e, ok in ((rng.standard_normal(n), True),
+                  (0.3 * np.r_[0.0, 0.0, u[:-2]] + rng.standard_normal(n), False)):
+        c_e, c_u, lags, c_eu = covariances(e, u, m)
+        r_eu, _, _, verdict = input_independence(c_e, c_u, c_eu, n)
+        assert verdict is ok
+        assert lags.tolist() == list(range(-m, m + 1)) and r_eu.shape == (2 * m + 1,)

@@ -257,7 +257,7 @@ def test_result_is_frozen_and_exports():
         res.forgetting = 0.5
     df = res.to_pandas()
     assert list(df.columns[:5]) == ["time", "a1", "a2", "b1", "b2"]
-    d = res.as_dict()
+    d = res.to_dict()
     json.dumps(d)                                            # JSON-ready
     assert d["a"] == pytest.approx(res.theta[-1, :2].tolist())
     assert set(d) >= {"final", "final_std", "forgetting", "prediction_mse", "orders"}

@@ -310,14 +310,11 @@ def _as_recording_columns(run, rec):
                      source="<simulation>")
 
 
-#: Modules of :mod:`workbench.identify` that add a ``workbench identify`` sub-command.
-IDENTIFY_MODULES = ("arx", "rls", "valve_fit", "grey_box")
-
 #: ``workbench bench NAME``: "module:function" taking ``quick`` and returning a dict.
 BENCHMARKS = {
     "simulate": "workbench.bench:bench_simulate",
     "sweep": "workbench.stability.maps:bench",
-    "rls": "workbench.identify.rls:bench",
+    "rls": "workbench.bench.rls:bench",
     "greybox": "workbench.identify.grey_box:bench",
     "mpc": "workbench.controllers.mpc:bench",
     "diagnose": "workbench.diagnose.bench:bench",
@@ -461,18 +458,9 @@ def build_parser() -> argparse.ArgumentParser:
     mp.add_argument("--quiet", action="store_true", help="no progress bar")
     mp.set_defaults(func=_cmd_map)
 
-    ident = sub.add_parser("identify", help="models from recordings: arx, rls, valve, greybox",
-                           description="Identification from recorded data. Each method has its "
-                                       "own sub-command; --help on each.",
-                           epilog=EPILOG)
-    isub = ident.add_subparsers(dest="method", metavar="METHOD")
-    isub.required = True
+    from .cli.identify import register as register_identify
+    register_identify(sub)
     import importlib
-    for mod in IDENTIFY_MODULES:
-        try:
-            importlib.import_module(f"workbench.identify.{mod}").add_cli(isub)
-        except (ImportError, AttributeError):
-            continue            # a method not (yet) built
 
     try:
         importlib.import_module("workbench.diagnose.cli").add_cli(sub)

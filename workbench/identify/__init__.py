@@ -1,12 +1,13 @@
 """Identification: a model from data, each with the validation that says whether to trust it.
 
-Modules: :mod:`.arx` (least squares ARX, order selection, residual analysis),
+Modules: :mod:`.arx` (least squares ARX, order selection, validation),
+:mod:`.residuals` (whiteness and input-independence tests of residuals),
 :mod:`.excitation` (PRBS / APRBS), :mod:`.rls` (recursive least squares with
-forgetting), :mod:`.valve_fit` (paper 003's valve characteristic approximations),
-:mod:`.grey_box` (physical parameters of the CasADi plant from recordings).
+forgetting), :mod:`.valve` (paper 003's valve characteristic approximations; the old
+name :mod:`.valve_fit` re-exports it), :mod:`.grey_box` (physical parameters of the
+CasADi plant from recordings).
 
-Each module that has a command line part exposes ``add_cli(subparsers)``, which adds
-its ``workbench identify NAME`` sub-command.
+The ``workbench identify`` command line is :mod:`workbench.cli.identify`.
 """
 
 from .arx import ArxModel, ArxValidation, OrderSelection, fit_arx, select_order
@@ -14,8 +15,8 @@ from .arx import validate as validate_arx
 from .excitation import aprbs, as_reference, prbs
 from .grey_box import GreyBoxResult, estimate
 from .rls import ForgettingChoice, RlsResult, choose_forgetting, rls
-from .valve_fit import (AffineTableFit, PolynomialValveFit, ValveTable, fit_affine,
-                        fit_polynomial, generate_valve_table, load_valve_table, select_degrees)
+from .valve import (AffineTableFit, PolynomialValveFit, ValveTable, fit_affine,
+                    fit_polynomial, generate_valve_table, load_valve_table, select_degrees)
 
 __all__ = [
     "ArxModel", "ArxValidation", "OrderSelection", "fit_arx", "select_order", "validate_arx",

@@ -251,7 +251,7 @@ __all__ += ["rls_figure"]
 
 
 # ---------------------------------------------------------------------- valve characteristic
-# (paper 003; results from :mod:`workbench.identify.valve_fit`)
+# (paper 003; results from :mod:`workbench.identify.valve`)
 _G = 1e3          # g/s per kg/s
 _BAR = 1e5        # Pa per bar
 
@@ -262,7 +262,7 @@ def valve_curves_figure(curves: Any, path: str | os.PathLike | None = None, titl
     Parameters
     ----------
     curves : mapping
-        From :func:`workbench.identify.valve_fit.valve_curves`: ``pressures`` (Pa),
+        From :func:`workbench.identify.valve.valve_curves`: ``pressures`` (Pa),
         ``data`` (one (u, q) pair per pressure, V and kg/s) and ``fits`` (label ->
         one (u, q) pair per pressure).
     path : str or path-like, optional
@@ -345,7 +345,7 @@ def pressure_gain_figure(gains: Any, path: str | os.PathLike | None = None, titl
     Parameters
     ----------
     gains : sequence of PressureGain
-        From :mod:`workbench.identify.valve_fit` (``label``, ``u`` V, ``p_e`` Pa,
+        From :mod:`workbench.identify.valve` (``label``, ``u`` V, ``p_e`` Pa,
         ``cp`` kg/(s Pa), ``gu`` kg/(s V)); one labelled ``"data"`` is drawn as points.
     path : str or path-like, optional
         Where to save. Without it the figure is returned.
@@ -409,7 +409,7 @@ def tank_steps_figure(tests: Any, path: str | os.PathLike | None = None, title: 
     Parameters
     ----------
     tests : TankStepTests
-        From :func:`workbench.identify.valve_fit.tank_steps` (``steps`` keyed by
+        From :func:`workbench.identify.valve.tank_steps` (``steps`` keyed by
         (law, du), ``reference``, ``u_e``, ``volume``).
     path : str or path-like, optional
         Where to save. Without it the figure is returned.

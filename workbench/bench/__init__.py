@@ -1,0 +1,1 @@
+"""Benchmarks with their baselines: one module per ``workbench bench NAME``."""

@@ -1,0 +1,71 @@
+"""Valve characteristic fits of paper 003: approximations I and II from a measured table.
+
+A valve table is the measured mass flow q_m (kg/s) *into* a port held at pressure p
+(Pa, absolute) with the valve at command u (V): a CSV file with columns ``u``, ``p``,
+``q_m`` and optional ``# key: value`` metadata lines (:func:`load_valve_table`). From
+it this module gives
+
+* **approximation I** (:func:`fit_polynomial`): the full bivariate polynomial
+  q_m = sum_ij c_ij x^i s^j, degrees chosen by the user or by k-fold cross validation
+  (:func:`select_degrees`); the simulation model of paper 003;
+* **approximation II** (:func:`fit_affine`): the input-affine law
+  q_m = phi(p) + psi(p, sgn Gamma) Gamma(s) with Gamma odd, fitted with constraints
+  by CasADi + IPOPT; the control model, written in the plant file's convention so a
+  :class:`~workbench.Plant` can use it (:meth:`AffineTableFit.plant_values`);
+* their validation as in paper 003: the multiple correlation coefficient R and the
+  errors in g/s (:class:`FitQuality`), the pressure gain characteristic q_m(p_e, u) = 0
+  with Cp = -dq/dp and Gu = dq/du along it (:func:`pressure_gain`,
+  :func:`pressure_gain_from_data`), and the tank step tests (:func:`tank_steps`);
+* a generator of such tables from a plant's four-edge valve with a symmetric
+  underlap leakage and measurement noise (:func:`generate_valve_table`).
+
+Variables: s = (u - command_center) / command_span is the normalised command
+(clipped to the table's range); the pressure polynomials of approximation II are in
+p / 1e5 Pa (bar), as the plant file's ``affine_*`` keys (:mod:`workbench.params`).
+
+Examples
+--------
+>>> from workbench import Plant, PlantParams
+>>> from workbench.identify import valve as vf
+>>> table = vf.load_valve_table("tests/data/valve/rig25_table.csv")      # doctest: +SKIP
+>>> fit1 = vf.fit_polynomial(table, 5, 10)                               # doctest: +SKIP
+>>> fit2 = vf.fit_affine(table)                                          # doctest: +SKIP
+>>> round(fit1.quality.r, 4), round(fit2.quality.max_error_g_s, 2)      # doctest: +SKIP
+(0.9999, 1.47)
+>>> base = PlantParams.from_toml("designs/plants/rig25_mpye.toml")     # doctest: +SKIP
+>>> plant = Plant(base.replace(**fit2.plant_values()))                   # doctest: +SKIP
+>>> gains = vf.pressure_gain(fit2.flow, [4.9, 5.0, 5.1], table.pressure_range)  # doctest: +SKIP
+
+Modules: :mod:`.table` (the table format), :mod:`.generator` (tables from a plant's
+valve), :mod:`.polynomial` (approximation I), :mod:`.affine` (approximation II),
+:mod:`.quality` (R and errors), :mod:`.gain` (pressure gain characteristic),
+:mod:`.tank` (tank step tests), :mod:`.report` (all at once, figures).
+
+Command line (:mod:`workbench.cli.identify`): ``workbench identify valve TABLE.csv
+--approx both --out DIR`` and ``workbench identify valve-table PLANT.toml --out
+TABLE.csv`` (the generator).
+"""
+
+from __future__ import annotations
+
+from .affine import PRESSURE_SCALE, AffineTableFit, fit_affine
+from .gain import (PressureGain, TableLaw, compare_pressure_gain, pressure_gain,
+                   pressure_gain_from_data)
+from .generator import centre_dense_commands, generate_valve_table, valve_flow_law
+from .lstsq import serial_blas
+from .polynomial import DegreeSelection, PolynomialValveFit, fit_polynomial, select_degrees
+from .quality import FitQuality
+from .report import ValveFitReport, analyse, valve_curves, write_figures
+from .table import COLUMNS, G_PER_KG, MIN_POINTS, ValveTable, load_valve_table
+from .tank import TankStep, TankStepTests, tank_steps
+
+__all__ = [
+    "COLUMNS", "MIN_POINTS", "G_PER_KG", "PRESSURE_SCALE",
+    "ValveTable", "load_valve_table",
+    "valve_flow_law", "centre_dense_commands", "generate_valve_table",
+    "FitQuality", "PolynomialValveFit", "fit_polynomial", "DegreeSelection", "select_degrees",
+    "AffineTableFit", "fit_affine", "TableLaw",
+    "PressureGain", "pressure_gain", "pressure_gain_from_data", "compare_pressure_gain",
+    "TankStep", "TankStepTests", "tank_steps",
+    "ValveFitReport", "analyse", "valve_curves", "write_figures", "serial_blas",
+]
