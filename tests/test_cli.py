@@ -115,16 +115,30 @@ def test_broken_command_module_is_an_error_not_a_missing_command(monkeypatch, ca
     assert "Traceback" in err and "ModuleNotFoundError" in err
 
 
-def test_command_module_without_register_names_the_cause(monkeypatch):
+def _fake_module(name, register=None):
     import types
+    mod = types.ModuleType(name)
+    if register is not None:
+        mod.register = register
+    return mod
 
+
+def _raising_register(subparsers):
+    raise RuntimeError("half-written command")
+
+
+@pytest.mark.parametrize("register,cause,word", [(None, AttributeError, "register"),
+                                                 (_raising_register, RuntimeError,
+                                                  "half-written command")])
+def test_command_module_failure_names_the_cause(monkeypatch, register, cause, word):
+    """No register() or a register() that fails: an error naming module and cause."""
     from workbench.cli import CommandModuleError
     monkeypatch.setitem(sys.modules, "workbench.cli.robustness",
-                        types.ModuleType("workbench.cli.robustness"))
+                        _fake_module("workbench.cli.robustness", register))
     with pytest.raises(CommandModuleError, match="workbench.cli.robustness") as exc:
         build_parser()
-    assert isinstance(exc.value.__cause__, AttributeError)
-    assert "register" in str(exc.value)
+    assert isinstance(exc.value.__cause__, cause)
+    assert word in str(exc.value)
 
 
 def test_every_command_group_registers():

@@ -41,17 +41,19 @@ class CommandModuleError(WorkbenchError):
 
 
 def _register(group: str, subparsers) -> None:
-    """Import ``workbench.cli.<group>`` and call its ``register(subparsers)``."""
+    """Import ``workbench.cli.<group>`` and call its ``register(subparsers)``.
+
+    Any failure (import, missing ``register``, an error while registering) is a
+    :class:`CommandModuleError` naming the module, with the traceback in the message.
+    """
     module_name = f"{__name__}.{group}"
     try:
-        module = importlib.import_module(module_name)
-        register = module.register
+        importlib.import_module(module_name).register(subparsers)
     except Exception as exc:            # any failure: a broken module, not a missing command
         cause = "".join(traceback.format_exception(exc)).rstrip()
         raise CommandModuleError(f"the command module {module_name} cannot be loaded "
                                  f"({type(exc).__name__}: {exc}); its commands are "
                                  f"unavailable. Cause:\n{cause}") from exc
-    register(subparsers)
 
 
 def build_parser() -> argparse.ArgumentParser:
