@@ -1822,7 +1822,7 @@ def add_cli(subparsers) -> None:
     p.set_defaults(func=_cmd_greybox)
 
 
-# ====================================================================== synthetic recordings
+# ====================================================================== benchmark
 def _aprbs_doublets(duration: float, dt: float, rng: np.random.Generator, center: float,
                     amplitude: float, hold: tuple[float, float]) -> np.ndarray:
     """Command of random doublets (+a then -a, random a and hold) around ``center``, V.
