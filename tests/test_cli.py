@@ -103,3 +103,133 @@ def test_limits_help_is_complete(capsys):
     for opt in ("--x", "--w0", "--zeta", "--sample-time", "--k0", "--kp", "--kv", "--json",
                 "null"):
         assert opt in out
+
+
+# ---------------------------------------------------------------------- broken command modules
+def test_broken_command_module_is_an_error_not_a_missing_command(monkeypatch, capsys):
+    """A command module that cannot be imported stops the CLI with its cause (exit 1)."""
+    monkeypatch.setitem(sys.modules, "workbench.cli.diagnose", None)   # import -> ImportError
+    assert main(["check", str(PLANT)]) == 1          # even a command of another module
+    err = capsys.readouterr().err
+    assert "workbench.cli.diagnose" in err and "cannot be loaded" in err
+    assert "Traceback" in err and "ModuleNotFoundError" in err
+
+
+def _fake_module(name, register=None):
+    import types
+    mod = types.ModuleType(name)
+    if register is not None:
+        mod.register = register
+    return mod
+
+
+def _raising_register(subparsers):
+    raise RuntimeError("half-written command")
+
+
+@pytest.mark.parametrize("register,cause,word", [(None, AttributeError, "register"),
+                                                 (_raising_register, RuntimeError,
+                                                  "half-written command")])
+def test_command_module_failure_names_the_cause(monkeypatch, register, cause, word):
+    """No register() or a register() that fails: an error naming module and cause."""
+    from workbench.cli import CommandModuleError
+    monkeypatch.setitem(sys.modules, "workbench.cli.robustness",
+                        _fake_module("workbench.cli.robustness", register))
+    with pytest.raises(CommandModuleError, match="workbench.cli.robustness") as exc:
+        build_parser()
+    assert isinstance(exc.value.__cause__, cause)
+    assert word in str(exc.value)
+
+
+def test_every_command_group_registers():
+    """The top-level commands are exactly those of the command modules (none missing)."""
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    assert set(sub.choices) == {"check", "linearize", "simulate", "limits", "map", "identify",
+                                "diagnose", "robustness", "bench"}
+
+
+# ---------------------------------------------------------------------- bench registry
+def test_bench_registry_matches_the_command():
+    from workbench import bench
+    from workbench.errors import InputError
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    name_arg = next(a for a in sub.choices["bench"]._actions if a.dest == "name")
+    assert tuple(name_arg.choices) == bench.NAMES
+    with pytest.raises(InputError, match="no benchmark 'nope'"):
+        bench.run("nope")
+
+
+@pytest.mark.parametrize("name", ["simulate", "sweep", "rls", "greybox", "mpc", "diagnose"])
+def test_every_benchmark_module_loads(name):
+    """Each registered benchmark imports and exposes bench(quick=...) (nothing is run)."""
+    import inspect
+
+    from workbench import bench
+    fun = bench.load(name)
+    assert "quick" in inspect.signature(fun).parameters
+
+
+def test_bench_module_that_fails_to_import_is_reported(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "workbench.bench.sweep", None)
+    assert main(["bench", "sweep", "--quick"]) == 2
+    assert "benchmark 'sweep' is not available" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------- replay (library)
+def test_replay_keeps_the_recording_columns(tmp_path):
+    """Open-loop replay: the simulated columns replace the recorded ones, the others
+    (here an unknown 'extra') are copied; the time base is the recording's."""
+    from workbench import Plant
+    from workbench.recording import Recording
+    from workbench.replay import replay
+    t = np.arange(0.0, 0.2, 0.001)
+    rec = Recording.from_arrays(t, u=np.where(t < 0.1, 5.0, 5.5), x=np.full_like(t, 0.25),
+                                extra=np.sin(t))
+    res = replay(Plant.from_toml(PLANT), rec, mode="open", progress=False)
+    assert res.mode == "open_loop"
+    assert res.recording.columns == rec.columns
+    np.testing.assert_array_equal(res.recording.t, rec.t)
+    np.testing.assert_array_equal(res.recording["extra"], rec["extra"])
+    np.testing.assert_array_equal(res.recording["u"], rec["u"])     # the command applied
+    assert res.recording["x"][0] == pytest.approx(0.25, abs=1e-9)    # starts where recorded
+
+
+def test_replay_closed_loop_needs_a_reference():
+    from workbench import Plant
+    from workbench.errors import InputError
+    from workbench.recording import Recording
+    from workbench.replay import replay
+    t = np.arange(0.0, 0.05, 0.001)
+    rec = Recording.from_arrays(t, u=np.full_like(t, 5.0), x=np.full_like(t, 0.25))
+    with pytest.raises(InputError, match="needs an 'r' column"):
+        replay(Plant.from_toml(PLANT), rec, mode="closed")
+
+
+# ---------------------------------------------------------------------- map controller
+def test_map_controller_from_plant_file_and_overrides(tmp_path):
+    """Gains from the plant file's [controller] (read here with tomllib), overridden one by
+    one; without a [controller] a sample time and a gain are needed unless swept."""
+    import tomllib
+
+    import tomli_w
+
+    from workbench import Plant
+    from workbench.errors import InputError
+    from workbench.stability.loop import map_controller
+    plant = Plant.from_toml(PLANT)
+    doc = tomllib.loads(PLANT.read_text())
+    ctrl = doc.pop("controller")
+    got = map_controller(plant)
+    assert got["kp"] == ctrl["kp"] and got["kd"] == ctrl["kd"]
+    assert got["sample_time"] == ctrl["sample_time"]
+    assert map_controller(plant, kd=0.3, sample_time=0.002) == {
+        "kp": ctrl["kp"], "kd": 0.3, "ki": got["ki"], "sample_time": 0.002}
+    bare_file = tmp_path / "bare.toml"
+    bare_file.write_text(tomli_w.dumps(doc))
+    bare = Plant.from_toml(bare_file)
+    with pytest.raises(InputError, match="no sample time"):
+        map_controller(bare, kp=1.0)
+    with pytest.raises(InputError, match="no gain"):
+        map_controller(bare, sample_time=0.01)
+    assert map_controller(bare, {"k0", "sample_time"}) == {
+        "kp": 1.0, "kd": 0.0, "ki": 0.0, "sample_time": 0.01}      # placeholders, swept

@@ -219,7 +219,8 @@ def test_runs_on_a_plant_with_more_states(rig25):
 # ---------------------------------------------------------------------- bench and design
 def test_bench_reports_null_without_do_mpc(monkeypatch):
     monkeypatch.setitem(sys.modules, "do_mpc", None)         # import do_mpc -> ImportError
-    res = mpc.bench(quick=True, jit=False)
+    from workbench.bench import mpc as mpc_bench
+    res = mpc_bench.bench(quick=True, jit=False)
     assert res["do_mpc_median_ms"] is None and res["speedup_vs_do_mpc"] is None
     assert any("do-mpc" in n for n in res["notes"])
     assert res["horizon"] >= 20 and res["sample_time_s"] == 0.01

@@ -347,18 +347,10 @@ def monte_carlo(plant: Plant, controllers: Mapping[str, Callable[[Plant], object
         uncertainty=tuple(uncertainty))
 
 
-# --------------------------------------------------------------------------- CLI
+# --------------------------------------------------------------------------- ranges by name
 
-_SETS = {"usual": DEFAULT_UNCERTAINTY, "paper002": PAPER_002_UNCERTAINTY}
-
-DESCRIPTION = ("Monte Carlo robustness of the plant file's [controller]: validate it "
-               "(workbench.validate, standard profile) on N plants drawn from uncertainty "
-               "ranges and report the pass rate with its 95 %% interval, the median and worst "
-               "IAE and what fails. Ranges: --ranges usual (heat coefficient 1..1.4, sonic "
-               "conductance x0.7..1.3, mass x0.5..2, supply +-1 bar) or paper002 (paper 002's "
-               "bounds: heat coefficient 1..1.3997, combined flow factor 0.075..1.3297 on kappa "
-               "C, mass and supply as usual), or your own with --vary (repeatable). With --out, "
-               "writes DIR/robustness.csv (one row per draw), robustness.json and robustness.png.")
+#: Built-in uncertainty ranges by name (``workbench robustness --ranges NAME``).
+UNCERTAINTY_SETS = {"usual": DEFAULT_UNCERTAINTY, "paper002": PAPER_002_UNCERTAINTY}
 
 
 def parse_vary(text: str) -> Uncertainty:
@@ -375,31 +367,7 @@ def parse_vary(text: str) -> Uncertainty:
     return Uncertainty(key.strip(), low, high, parts[2].strip() if len(parts) == 3 else "factor")
 
 
-def add_cli(subparsers):
-    """Add the ``robustness`` sub-command to ``workbench``'s sub-parsers."""
-    p = subparsers.add_parser("robustness", help="Monte Carlo pass rate of the plant file's "
-                                                 "controller on drawn plants",
-                              description=DESCRIPTION,
-                              epilog="Units are SI (m, Pa absolute, kg, s, V). Example: workbench "
-                                     "robustness designs/plants/situm_rodless.toml --draws 20 "
-                                     "--ranges paper002 --out mc/")
-    p.add_argument("plant", metavar="PLANT.toml", help="plant file with a [controller]")
-    p.add_argument("--draws", type=int, default=20, metavar="N", help="drawn plants (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--ranges", choices=tuple(_SETS), default="usual",
-                   help="built-in ranges (default usual)")
-    p.add_argument("--vary", action="append", metavar="KEY=LOW:HIGH[:MODE]",
-                   help="own range instead of --ranges (repeatable); MODE factor, offset, "
-                        "value or flow")
-    p.add_argument("--workers", type=int, metavar="N", help="processes (default: all cores)")
-    p.add_argument("--out", metavar="DIR", help="write robustness.csv, .json and .png here")
-    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run_cli)
-    return p
-
-
-def _figure_axes(res: RobustnessResult, plant: Plant) -> list[tuple[np.ndarray, str]]:
+def figure_axes(res: RobustnessResult, plant: Plant) -> list[tuple[np.ndarray, str]]:
     """Two axes to show the draws on: the flow factor when kappa or C was drawn, the
     mass factor when the mass was, then the other drawn keys (relative to nominal
     where the nominal is not zero); a constant axis when fewer than two were drawn."""
@@ -419,52 +387,4 @@ def _figure_axes(res: RobustnessResult, plant: Plant) -> list[tuple[np.ndarray, 
     return axes[:2]
 
 
-def run_cli(args) -> int:
-    """Run the sub-command (user errors raise WorkbenchError: exit 2 in main)."""
-    import json
-    from pathlib import Path
-    from .controllers import from_plant
-    from .params import atomic_write_text
-    if args.draws < 1:
-        raise InputError(f"--draws must be >= 1, got {args.draws}")
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers must be >= 1, got {args.workers}")
-    plant = Plant.from_toml(args.plant)
-    if not plant.params.has_controller:
-        raise InputError(f"{args.plant} has no [controller] section to validate")
-    unc = tuple(parse_vary(v) for v in args.vary) if args.vary else _SETS[args.ranges]
-    controller = from_plant(plant)
-    name = getattr(controller, "kind", "controller")
-    res = monte_carlo(plant, {name: lambda p: controller}, n=args.draws, seed=args.seed,
-                      uncertainty=unc, workers=args.workers,
-                      progress=False if (args.quiet or args.json) else None)
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "robustness.csv", res.to_csv_text(plant))
-        atomic_write_text(out / "robustness.json", json.dumps(
-            {"plant": str(args.plant), **res.to_dict()}, indent=1) + "\n")
-        from . import plots
-        (x, xl), (y, yl) = _figure_axes(res, plant)
-        fig = plots.robustness_figure(res, x, y, xl, yl, title=f"Monte Carlo: {args.plant}")
-        plots.save_figure(fig, out / "robustness.png")
-    if args.json:
-        d = res.to_dict()
-        d["controllers"][name]["pass_interval"] = list(res.pass_interval(name))
-        print(json.dumps({"plant": str(args.plant), **d}, indent=1))
-        return 0
-    _, rate, n, med, worst, check = res.table()[0]
-    lo, hi = res.pass_interval(name)
-    print(f"Monte Carlo robustness of {args.plant} ({name}), {n} draws, seed {args.seed}")
-    for u in unc:
-        print(f"  {u.key}: {u.low:g} .. {u.high:g} ({u.mode})")
-    print(f"  pass rate {rate:.0%} (95 % interval {lo:.0%} .. {hi:.0%})")
-    if math.isfinite(med):
-        print(f"  IAE median {med * 1e3:.3g} mm s, worst {worst * 1e3:.3g} mm s")
-    if check:
-        print(f"  most frequent failing check: {check}")
-    if res.first_error.get(name):
-        print(f"  first solver error: {res.first_error[name]}")
-    if args.out:
-        print(f"  written: {Path(args.out) / 'robustness.csv'}, robustness.json, robustness.png")
-    return 0
+_figure_axes = figure_axes          # former private name

@@ -13,8 +13,8 @@ The method is split into parts (one concept per module):
 * :mod:`.explain` -- all candidates in parallel, ranked by evidence;
 * :mod:`.polish` -- a finding's values refined by the grey-box estimator;
 * :mod:`.core` -- :func:`diagnose`: replay, locate, explain, augment, refit;
-* :mod:`.report`, :mod:`.figures` -- the HTML/PDF report; :mod:`.cli` -- ``workbench
-  diagnose``; :mod:`.bench` -- ``workbench bench diagnose``;
+* :mod:`.report`, :mod:`.figures` -- the HTML/PDF report (``workbench diagnose`` is
+  :mod:`workbench.cli.diagnose`, ``workbench bench diagnose`` :mod:`workbench.bench.diagnose`);
 * :mod:`.synth` -- recordings of rigs with a concealed effect (tests, proof design;
   the diagnosis never imports it).
 

@@ -101,7 +101,8 @@ class Finding:
     std: dict[str, float] = field(default_factory=dict)
     ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
 
-    def as_json(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
+        """The finding as in formats.md section 4 (one entry of ``findings``)."""
         return {"effect": self.effect, "confidence": round(float(self.confidence), 3),
                 "parameters": {k: _num(v) for k, v in self.parameters.items()},
                 "where": [[float(a), float(b)] for a, b in self.where],
@@ -119,7 +120,7 @@ def _round(v: float) -> float | None:
 
 @dataclass
 class Diagnosis:
-    """Result of :func:`diagnose`; :meth:`to_json` is formats.md section 4 exactly."""
+    """Result of :func:`diagnose`; :meth:`to_dict` is formats.md section 4 exactly."""
 
     plant_file: str
     recording_file: str
@@ -145,12 +146,12 @@ class Diagnosis:
     timings: dict[str, float] = field(default_factory=dict)
     polished: dict[str, Any] = field(default_factory=dict)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         """The diagnosis result of formats.md section 4 (exactly those keys)."""
         return {"plant": self.plant_file, "recording": self.recording_file,
                 "fit_before": {k: _round(v) for k, v in self.fit_before.items()},
                 "fit_after": {k: _round(v) for k, v in self.fit_after.items()},
-                "findings": [f.as_json() for f in self.findings]}
+                "findings": [f.to_dict() for f in self.findings]}
 
     def details(self) -> dict[str, Any]:
         """Everything else (ranking, regimes, notes, timings) for ``details.json``."""
@@ -195,7 +196,7 @@ class Diagnosis:
         out.mkdir(parents=True, exist_ok=True)
         paths = {"json": out / "diagnosis.json", "plant": out / "plant.augmented.toml",
                  "details": out / "details.json"}
-        atomic_write_text(paths["json"], json.dumps(self.to_json(), indent=2) + "\n")
+        atomic_write_text(paths["json"], json.dumps(self.to_dict(), indent=2) + "\n")
         self.augmented.to_toml(paths["plant"])
         atomic_write_text(paths["details"], json.dumps(_jsonable(self.details()), indent=1) + "\n")
         if report:

@@ -1,4 +1,4 @@
-"""``workbench diagnose PLANT.toml RECORDING --out DIR``: the command-line part."""
+"""``workbench diagnose PLANT.toml RECORDING --out DIR`` (:func:`workbench.diagnose.diagnose`)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-__all__ = ["add_cli", "run"]
+__all__ = ["register"]
 
 DESCRIPTION = (
     "Diagnose where the nominal plant and a recording differ and what physics is missing. "
@@ -21,8 +21,8 @@ DESCRIPTION = (
     "(every candidate's evidence).")
 
 
-def add_cli(subparsers) -> argparse.ArgumentParser:
-    """Add the ``diagnose`` sub-command to ``workbench``'s sub-parsers."""
+def register(subparsers) -> None:
+    """Add ``diagnose`` to ``workbench``'s sub-parsers."""
     from ..params import EFFECT_NAMES
     p = subparsers.add_parser("diagnose", help="locate and explain a model/recording mismatch",
                               description=DESCRIPTION,
@@ -41,13 +41,12 @@ def add_cli(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, metavar="N",
                    help="processes for the candidate refits (default: all cores)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html/.pdf")
-    p.set_defaults(func=run)
-    return p
+    p.set_defaults(func=_diagnose)
 
 
-def run(args: argparse.Namespace) -> int:
+def _diagnose(args: argparse.Namespace) -> int:
     """Run the sub-command (errors a user can cause are WorkbenchError: exit 2 in main)."""
-    from .core import diagnose
+    from ..diagnose import diagnose
     verbose = not args.quiet and not args.json
     if verbose:
         print(f"diagnosing {args.recording} on {args.plant} ...", file=sys.stderr, flush=True)
@@ -55,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
                  mode=args.mode, verbose=verbose)
     paths = d.write(args.out, report=not args.no_report)
     if args.json:
-        print(json.dumps(d.to_json(), indent=2))
+        print(json.dumps(d.to_dict(), indent=2))
     else:
         print(d.summary())
         print("wrote " + ", ".join(str(p) for p in paths.values()))

@@ -1,4 +1,4 @@
-"""Benchmarks: ``workbench bench NAME --json``. Each measures against a baseline in the same run.
+"""``workbench bench simulate``: the closed loop against scipy, accuracy against Radau.
 
 Timing numbers are for this machine at the time of the run; the ratios are what to
 compare between runs. Nothing here is a test.
@@ -12,13 +12,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-__all__ = ["run", "bench_simulate"]
+__all__ = ["bench"]
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _reference_profile(duration: float):
-    from . import simulate
+    from .. import simulate
     levels = [0.10, 0.40, 0.25, 0.30, 0.15, 0.35, 0.20, 0.45, 0.25, 0.30, 0.10, 0.25]
     hold = duration / len(levels)
     return simulate.steps(levels, hold=hold)
@@ -114,7 +114,7 @@ def _best_of(fn, repeats: int, min_total: float = 1.0):
 BENCH_SUBSTEPS = 14
 
 
-def bench_simulate(quick: bool = False) -> dict:
+def bench(quick: bool = False) -> dict:
     """Closed loop, 25 mm reference plant (4 states), PD at 10 ms, 24 s of steps.
 
     Methods: the compiled loop (``simulate.CompiledLoop``: ROS4, 14 substeps per
@@ -130,8 +130,8 @@ def bench_simulate(quick: bool = False) -> dict:
     """
     import sys
 
-    from . import controllers, simulate
-    from .plant import Plant
+    from .. import controllers, simulate
+    from ..plant import Plant
     plant_file = ROOT / "designs" / "plants" / "rig25_mpye.toml"
     plant = Plant.from_toml(plant_file)
     ctrl = controllers.from_plant(plant)
@@ -193,13 +193,3 @@ def bench_simulate(quick: bool = False) -> dict:
         "reference": ref_info,
         "target": {"realtime_factor": 500, "speedup_vs_scipy": 30},
     }
-
-
-_BENCHES = {"simulate": bench_simulate}
-
-
-def run(name: str, quick: bool = False) -> dict:
-    """Run the named benchmark and return its result."""
-    if name not in _BENCHES:
-        raise KeyError(f"no benchmark '{name}'; known: {', '.join(_BENCHES)}")
-    return _BENCHES[name](quick=quick)

@@ -19,8 +19,7 @@ __all__ = ["bench"]
 
 def bench(quick: bool = False) -> dict:
     """Diagnose a 24 s (quick: 8 s) recording with all candidates; return timings (s)."""
-    from . import synth
-    from .core import diagnose
+    from ..diagnose import diagnose, synth
     duration = 8.0 if quick else 24.0
     effect = "dry_friction"
     case = synth.concealed_case(effect, seed=11)
