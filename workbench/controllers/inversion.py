@@ -54,40 +54,12 @@ import numpy as np
 from ..errors import InputError
 from ..physics import gas, valve
 
-__all__ = ["CommandMap", "FlowCommand", "ValveInversion", "iso6358_flow_numpy",
-           "bracketed_newton"]
+__all__ = ["CommandMap", "FlowCommand", "ValveInversion", "bracketed_newton"]
 
 SIDES = ("a", "b")
 
 
 # ---------------------------------------------------------------------- numeric helpers
-def iso6358_flow_numpy(conductance, b, p1, p2, t1=gas.T_REF, t2=gas.T_REF,
-                       margin: float = gas.LAMINAR_MARGIN) -> np.ndarray:
-    """NumPy twin of :func:`workbench.physics.gas.iso6358_flow` (kg/s, positive 1 -> 2).
-
-    The same formula, laminar patch included, on arrays: a CasADi call costs about
-    half a millisecond here, too slow for element-wise use in a controller. The
-    tests check that both agree to rounding.
-    """
-    p1 = np.asarray(p1, dtype=float)
-    p2 = np.asarray(p2, dtype=float)
-
-    def psi(ratio):
-        x = np.clip(ratio, b, 1.0)
-        y = 1.0 - x
-        m = margin
-        ya = np.abs(y)
-        patch = y * (3.0 * m - ya) / (2.0 * m ** 1.5)
-        root = np.where(ya >= m, np.sqrt(np.maximum(ya, m)) * np.sign(y), patch)
-        sub = np.sqrt(1.0 + x - 2.0 * b) * root / (1.0 - b)
-        return np.where(ratio <= b, 1.0, sub)
-
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fwd = conductance * p1 * gas.RHO_ANR * np.sqrt(gas.T_REF / t1) * psi(p2 / p1)
-        bwd = conductance * p2 * gas.RHO_ANR * np.sqrt(gas.T_REF / t2) * psi(p1 / p2)
-    return np.where(p1 >= p2, fwd, -bwd)
-
-
 def bracketed_newton(fun, target, lo, hi, rtol: float = 1e-13, atol: float = 1e-300,
                      max_iter: int = 100):
     """Solve fun(s) = target for s in [lo, hi] element-wise (guarded Newton).
@@ -393,8 +365,9 @@ class ValveInversion:
                     _horner(self.psi_out, pn))
         p = np.asarray(p, dtype=float)
         T = self.temperature
-        q_in = iso6358_flow_numpy(self.conductance, self.critical_ratio, self.p_s, p, T, T)
-        q_out = iso6358_flow_numpy(self.conductance, self.critical_ratio, p, self.p_atm, T, gas.T_REF)
+        # the physics law itself: on arrays it runs element-wise in numpy
+        q_in = gas.iso6358_flow(self.conductance, self.critical_ratio, self.p_s, p, T, T)
+        q_out = gas.iso6358_flow(self.conductance, self.critical_ratio, p, self.p_atm, T, gas.T_REF)
         return np.zeros_like(p), q_in, q_out
 
     def authority(self, p):

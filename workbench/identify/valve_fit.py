@@ -63,7 +63,7 @@ from ..linearize import TankTangent, tank_tangent
 from ..params import PlantParams
 from ..physics import gas
 from ..physics.valve import (AffineValveFit, affine_flow, effective_opening, gamma_odd,
-                             polyval, spool_position)
+                             polyval, rounded_edge_openings, spool_position)
 
 __all__ = [
     "COLUMNS", "MIN_POINTS", "G_PER_KG",
@@ -447,12 +447,8 @@ def valve_flow_law(plant_or_params, leakage: float = 0.0) -> Callable:
     d = float(leakage)
 
     def flow(p, u):
-        o = opening(u)
-        if d == 0.0:                                    # exactly the plant's four edges
-            o_in, o_out = ca.fmax(o, 0.0), ca.fmax(-o, 0.0)
-        else:
-            r = ca.sqrt(o * o + d * d)
-            o_in, o_out = 0.5 * (r + o), 0.5 * (r - o)
+        # physics.valve's rounded underlap law (with d = 0 exactly the plant's four edges)
+        o_in, o_out = rounded_edge_openings(opening(u), d)
         return (o_in * gas.iso6358_flow(C, b, p_s, p, T, T)
                 - o_out * gas.iso6358_flow(C, b, p, p_atm, T, T))
     return flow
