@@ -165,9 +165,8 @@ class CommandMap:
 
     def opening(self, u):
         """Signed effective opening (-) of command ``u`` (V); arrays allowed."""
-        s = np.clip((np.asarray(u, dtype=float) - self.center - self.offset) / self.span, -1.0, 1.0)
-        d = self.deadband
-        return (s - np.clip(s, -d, d)) / (1.0 - d)
+        s = valve.spool_position(np.asarray(u, dtype=float), self.center, self.span, self.offset)
+        return valve.effective_opening(s, self.deadband)
 
     @property
     def opening_range(self) -> tuple[float, float]:
@@ -361,8 +360,8 @@ class ValveInversion:
             # Horner in plain arithmetic: floats stay floats (fast in a controller),
             # arrays stay arrays
             pn = (p if isinstance(p, float) else np.asarray(p, dtype=float)) / self.pressure_scale
-            return (_horner(self.phi, pn) + 0.0 * pn, _horner(self.psi_in, pn),
-                    _horner(self.psi_out, pn))
+            return (valve.polyval(self.phi, pn) + 0.0 * pn, valve.polyval(self.psi_in, pn),
+                    valve.polyval(self.psi_out, pn))
         p = np.asarray(p, dtype=float)
         T = self.temperature
         # the physics law itself: on arrays it runs element-wise in numpy
@@ -412,13 +411,7 @@ class ValveInversion:
         s = np.asarray(opening, dtype=float)
         if self.law == "iso6358":
             return s + 0.0
-        mag = np.abs(s)
-        out = np.zeros_like(s)
-        power = np.ones_like(s)
-        for g in self.gamma:
-            out = out + g * s * power
-            power = power * mag
-        return out
+        return valve.gamma_odd(s, self.gamma)
 
     def _gamma_slope(self, s):
         mag = np.abs(s)
@@ -645,13 +638,6 @@ class ValveInversion:
             extra.append(f"null offset {c.offset:.3g} V compensated")
         return (f"{self.source or self.law}; command {c.center:g} +- {c.span:g} V in "
                 f"[{c.u_min:g}, {c.u_max:g}] V" + ("; " + ", ".join(extra) if extra else ""))
-
-
-def _horner(coeffs, x):
-    out = 0.0
-    for c in reversed(coeffs):
-        out = out * x + c
-    return out
 
 
 def _side(side: str) -> str:

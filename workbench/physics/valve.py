@@ -363,11 +363,11 @@ def fit_affine_to_four_edge(conductance: float, b: float, p_s: float, p_atm: flo
     pressures = np.linspace(p_atm, p_s, n_pressure)
     openings = np.linspace(-1.0, 1.0, n_opening)
     pp, oo = (a.ravel() for a in np.meshgrid(pressures, openings, indexing="ij"))
-    q_ref = np.array([float(four_edge_flows(o, p_s, p, p, p_atm, conductance, b,
-                                            temperature, temperature, temperature)[0])
-                      for p, o in zip(pp, oo)])
+    # the laws run element-wise on the whole grid (numpy backend of ops)
+    q_ref = four_edge_flows(oo, p_s, pp, pp, p_atm, conductance, b,
+                            temperature, temperature, temperature)[0]
     pn = pp / pressure_scale
-    g = np.array([float(gamma_odd(float(o), gamma)) for o in oo])
+    g = gamma_odd(oo, gamma)
     inlet = (g >= 0).astype(float)
     n_psi = psi_degree + 1
 
@@ -412,7 +412,7 @@ def fit_affine_to_four_edge(conductance: float, b: float, p_s: float, p_atm: flo
     fit = AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
                          pressure_scale=float(pressure_scale), rms=0.0, max_error=0.0,
                          pressure_range=(float(p_atm), float(p_s)), points=int(len(q_ref)))
-    q_fit = np.array([float(fit.flow(p, o)) for p, o in zip(pp, oo)])
+    q_fit = fit.flow(pp, oo)
     err = q_fit - q_ref
     return AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
                           pressure_scale=float(pressure_scale),
