@@ -594,6 +594,7 @@ def test_plant_file_chooses_the_underlap_law(tmp_path):
     # pinning flow into a is half as large (same pressure, same volume)
     dp_lin = float(lin_f(x, u0, base.p0)[2])
     dp_rnd = float(rnd_f(x, u0, rnd.p0)[2])
+    # (rel 1e-9: the opening at u0 is zero up to rounding of center + offset, ~1e-16)
     assert dp_lin == pytest.approx(2.0 * dp_rnd, rel=1e-9)
     assert math.copysign(1.0, dp_lin) == math.copysign(1.0, q_fill - q_vent)
     # the real (underlap-free) model is the same under either law
@@ -604,6 +605,9 @@ def test_plant_file_chooses_the_underlap_law(tmp_path):
             write_plant(tmp_path / "bad.toml", overrides={"valve.underlap_law": bad})
             Plant.from_toml(tmp_path / "bad.toml")
         assert "[valve] underlap_law" in str(exc.value)
+    # the key survives a save / load round trip
+    rnd.params.to_toml(tmp_path / "saved.toml")
+    assert Plant.from_toml(tmp_path / "saved.toml").params["valve.underlap_law"] == "rounded"
     # the input-affine law's pinning leak is the linear one: 'rounded' is refused there
     text = AFFINE_PLANT.read_text(encoding="utf-8").replace(
         "[valve]\n", '[valve]\nunderlap_law = "rounded"\n', 1)

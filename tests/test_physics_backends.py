@@ -339,3 +339,20 @@ def test_ops_where_and_backend_choice():
     f = ca.Function("f", [x], [ops.where(x > 0, 1.0 / x, 7.0)])
     assert float(f(0.0)) == 7.0 and float(f(4.0)) == 0.25
     assert ops.if_else is ops.where and ops.PI == ca.pi == math.pi
+
+
+def test_ops_quiet_silences_the_branch_not_taken():
+    import warnings
+    p = np.array([0.0, 2e5])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")            # any RuntimeWarning fails the test
+        with ops.quiet():
+            r = np.array([1e5, 1e5]) / p
+        q = physics.gas.iso6358_flow(1e-8, 0.3, p, 1e5)   # p = 0: 1e5/0 in the branch not taken
+    assert np.isinf(r[0]) and q[0] < 0 < q[1]
+
+
+def test_every_ops_name_is_tested():
+    tested = {"backend", "is_symbolic", "fmin", "fmax", "clip", "sqrt", "exp", "log", "tanh",
+              "fabs", "sign", "where", "if_else", "quiet", "PI"}
+    assert set(ops.__all__) == tested
