@@ -8,6 +8,7 @@ central finite differences; never from the code under test.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -519,3 +520,97 @@ def test_one_metre_line_delays_by_about_3_ms(tmp_path):
     # Only 4 default segments on 1 m: the front is smeared over a segment transit
     # (0.7 ms, 25 %), measured 2.45 ms (-16 %); 30 % allows for that.
     assert delay == pytest.approx(expected, rel=0.3)
+
+
+# ====================================================================== underlap laws
+ROOT_PLANTS = Path(__file__).resolve().parents[1] / "designs" / "plants"
+AFFINE_PLANT = Path(__file__).resolve().parent / "data" / "plants" / "input_affine.toml"
+
+
+@pytest.mark.parametrize("o", [-1.0, -0.3, -0.01, 0.0, 0.02, 0.5, 1.0])
+def test_the_two_underlap_laws(o):
+    d = 0.05
+    # linear law: every edge d more open than the ideal closed-centre edge
+    lp, lm = valve.edge_openings(o, d)
+    assert lp == pytest.approx(max(o, 0.0) + d, abs=1e-15)
+    assert lm == pytest.approx(max(-o, 0.0) + d, abs=1e-15)
+    # rounded law: ((r + o)/2, (r - o)/2), r = sqrt(o^2 + d^2), typed from the generator's doc
+    r = math.sqrt(o * o + d * d)
+    rp, rm = valve.rounded_edge_openings(o, d)
+    assert (rp, rm) == pytest.approx(((r + o) / 2, (r - o) / 2), abs=1e-15)
+    # both open the metering pair by o net; the rounded one keeps o_plus o_minus = d^2/4
+    assert lp - lm == pytest.approx(o, abs=1e-15) and rp - rm == pytest.approx(o, abs=1e-15)
+    assert rp * rm == pytest.approx(d * d / 4, rel=1e-12)
+    # they are different laws: centre d/2 against d, far out o against o + d
+    if o == 0.0:
+        assert (rp, lp) == pytest.approx((d / 2, d))
+    # without underlap both are the ideal edges
+    assert valve.rounded_edge_openings(o, 0.0) == (max(o, 0.0), max(-o, 0.0))
+    assert valve.edge_openings(o, 0.0) == (max(o, 0.0), max(-o, 0.0))
+    assert valve.underlap_openings(o, d, "rounded") == (rp, rm)
+    assert valve.underlap_openings(o, d) == (lp, lm)
+
+
+def test_unknown_underlap_law_is_refused():
+    with pytest.raises(ValueError, match="unknown underlap law 'round'; expected one of "
+                                         "'linear', 'rounded'"):
+        valve.underlap_openings(0.1, 0.01, "round")
+
+
+def test_valve_table_generator_uses_the_rounded_law():
+    from workbench.identify.valve_fit import valve_flow_law
+    prm = Plant.from_toml(ROOT_PLANTS / "rig25_mpye.toml").params
+    d, p, u = 0.05, 3.2e5, prm["valve.command_center"] + 0.1 * prm["valve.command_span"]
+    flow = valve_flow_law(prm, leakage=d)
+    C, b = prm["valve.sonic_conductance"], prm["valve.critical_pressure_ratio"]
+    p_s, p_atm, T = (prm["supply.pressure"], prm["gas.atmospheric_pressure"],
+                     prm["gas.temperature"])
+    s = valve.spool_position(u, prm["valve.command_center"], prm["valve.command_span"],
+                             prm.get("valve.null_offset", 0.0))
+    o = float(valve.effective_opening(s, prm.get("valve.deadband", 0.0)))
+    r = math.sqrt(o * o + d * d)
+    expected = ((r + o) / 2 * float(gas.iso6358_flow(C, b, p_s, p, T, T))
+                - (r - o) / 2 * float(gas.iso6358_flow(C, b, p, p_atm, T, T)))
+    assert float(flow(p, u)) == pytest.approx(expected, rel=1e-14)   # the same arithmetic
+
+
+def test_plant_file_chooses_the_underlap_law(tmp_path):
+    from workbench.errors import InputError
+    base = Plant.from_toml(write_plant(tmp_path / "lin.toml"))
+    assert base.params["valve.underlap_law"] == "linear"          # default: today's law
+    rnd = Plant.from_toml(write_plant(tmp_path / "rnd.toml",
+                                      overrides={"valve.underlap_law": "rounded"}))
+    prm = base.params
+    x = [0.25, 0.0, 3.0e5, 3.5e5]
+    u0 = prm["valve.command_center"] + prm.get("valve.null_offset", 0.0)
+    d = 1e-3
+    lin_f, rnd_f = base.regularised_f(d), rnd.regularised_f(d)
+    C, b, T = (prm["valve.sonic_conductance"], prm["valve.critical_pressure_ratio"],
+               prm["gas.temperature"])
+    p_s, p_atm = prm["supply.pressure"], prm["gas.atmospheric_pressure"]
+    q_fill = float(gas.iso6358_flow(C, b, p_s, x[2], T, T))
+    q_vent = float(gas.iso6358_flow(C, b, x[2], p_atm, T, T))
+    # at the centre the linear law opens every edge d, the rounded one d/2: the
+    # pinning flow into a is half as large (same pressure, same volume)
+    dp_lin = float(lin_f(x, u0, base.p0)[2])
+    dp_rnd = float(rnd_f(x, u0, rnd.p0)[2])
+    # (rel 1e-9: the opening at u0 is zero up to rounding of center + offset, ~1e-16)
+    assert dp_lin == pytest.approx(2.0 * dp_rnd, rel=1e-9)
+    assert math.copysign(1.0, dp_lin) == math.copysign(1.0, q_fill - q_vent)
+    # the real (underlap-free) model is the same under either law
+    assert np.array_equal(np.asarray(base.f(x, u0 + 0.7, base.p0)),
+                          np.asarray(rnd.f(x, u0 + 0.7, rnd.p0)))
+    for bad, msg in [("round", "did you mean 'rounded'"), ("smooth", "expected one of")]:
+        with pytest.raises(InputError, match=msg) as exc:
+            write_plant(tmp_path / "bad.toml", overrides={"valve.underlap_law": bad})
+            Plant.from_toml(tmp_path / "bad.toml")
+        assert "[valve] underlap_law" in str(exc.value)
+    # the key survives a save / load round trip
+    rnd.params.to_toml(tmp_path / "saved.toml")
+    assert Plant.from_toml(tmp_path / "saved.toml").params["valve.underlap_law"] == "rounded"
+    # the input-affine law's pinning leak is the linear one: 'rounded' is refused there
+    text = AFFINE_PLANT.read_text(encoding="utf-8").replace(
+        "[valve]\n", '[valve]\nunderlap_law = "rounded"\n', 1)
+    (tmp_path / "aff.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(InputError, match="applies only to the four-edge valve"):
+        Plant.from_toml(tmp_path / "aff.toml")

@@ -17,6 +17,7 @@ unchanged and describe the four-edge ISO 6358 valve)::
 
     [valve]
     law = "input_affine"          # or "iso6358" (the default)
+    underlap_law = "linear"       # or "rounded" (iso6358 law only), see physics.valve
     affine_phi = [0.0]            # kg/s: phi(p), leakage at every command
     affine_psi_in = [...]         # kg/s per unit Gamma: psi(p) while Gamma > 0 (inlet)
     affine_psi_out = [...]        # kg/s per unit Gamma: psi(p) while Gamma < 0 (exhaust)
@@ -45,6 +46,7 @@ from typing import Any, Mapping
 import tomli_w
 
 from .errors import InputError
+from .physics.valve import UNDERLAP_LAWS
 
 __all__ = [
     "Key",
@@ -173,6 +175,11 @@ SCHEMA: tuple[Key, ...] = (
     _k("valve", "law", "", kind="str", required=False, physical=False, default="iso6358",
        doc="valve flow law: 'iso6358' (four ISO 6358 edges) or 'input_affine' "
            "(paper 003: q = phi(p) + psi(p, sgn Gamma) Gamma(s))"),
+    _k("valve", "underlap_law", "", kind="str", required=False, physical=False,
+       default="linear",
+       doc="underlap law of the four ISO 6358 edges wherever the plant applies an "
+           "underlap (the equilibrium pin): 'linear' (every edge u more open) or "
+           "'rounded' ((sqrt(o^2 + u^2) +- o)/2, as the valve-table generator)"),
     _k("valve", "affine_phi", "kg/s", kind="floats", required=False, law="input_affine",
        doc="phi(p): port flow at every command, ascending powers of p/1e5 Pa"),
     _k("valve", "affine_psi_in", "kg/s", kind="floats", required=False, law="input_affine",
@@ -568,6 +575,7 @@ def _check_valve_law(values: Mapping[str, Any], source: str) -> None:
         raise InputError(f"expected one of {', '.join(repr(v) for v in VALVE_LAWS)}, got {law!r}"
                          + (f" (did you mean {hint[0]!r}?)" if hint else ""),
                          source=source, location="[valve] law")
+    _check_underlap_law(values, law, source)
     names = ", ".join(k.name for k in AFFINE_KEYS)
     if law == "input_affine":
         for key in AFFINE_KEYS:
@@ -587,6 +595,22 @@ def _check_valve_law(values: Mapping[str, Any], source: str) -> None:
                     f"{law!r}{'' if 'valve.law' in values else ' (the default)'}; "
                     f"set [valve] law = \"input_affine\" or remove {names}",
                     source=source, location=_fmt_path(key.path))
+
+
+def _check_underlap_law(values: Mapping[str, Any], law: str, source: str) -> None:
+    """``[valve] underlap_law`` is known, and 'rounded' only with the four-edge law
+    (the input-affine law's underlap leak is the linear one, see
+    :func:`workbench.physics.valve.affine_port_flows`)."""
+    under = values.get("valve.underlap_law", "linear")
+    if under not in UNDERLAP_LAWS:
+        hint = difflib.get_close_matches(under, UNDERLAP_LAWS, 1)
+        raise InputError(f"expected one of {', '.join(repr(v) for v in UNDERLAP_LAWS)}, "
+                         f"got {under!r}" + (f" (did you mean {hint[0]!r}?)" if hint else ""),
+                         source=source, location="[valve] underlap_law")
+    if under != "linear" and law == "input_affine":
+        raise InputError(f"underlap_law = {under!r} applies only to the four-edge valve "
+                         "(law = 'iso6358'); the input-affine law's underlap is 'linear'",
+                         source=source, location="[valve] underlap_law")
 
 
 def usual_permissions(tmp: str | os.PathLike, path: str | os.PathLike) -> None:

@@ -290,7 +290,8 @@ class Plant:
         else:
             q_va, q_vb, q_sup = valve.four_edge_flows(
                 opening, p_s, port_a, port_b, p_atm, pv["valve.sonic_conductance"],
-                pv["valve.critical_pressure_ratio"], T, port_ta, port_tb, underlap)
+                pv["valve.critical_pressure_ratio"], T, port_ta, port_tb, underlap,
+                underlap_law=prm["valve.underlap_law"])
 
         if n:
             length, diam = pv["lines.length"], pv["lines.diameter"]

@@ -49,6 +49,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..physics import chamber, piston
 from ..physics.gas import R_AIR
 from .inversion import ValveInversion
 
@@ -153,13 +154,13 @@ class DriveModel:
         """(V_a, V_b, dV_a/dt, dV_b/dt), m^3 and m^3/s; x clipped to the stroke."""
         x = _clip(x, 0.0, self.stroke)
         v = v if isinstance(v, float) else np.asarray(v, dtype=float)
-        return (self.dead_a + self.area_a * x, self.dead_b + self.area_b * (self.stroke - x),
-                self.area_a * v, -self.area_b * v)
+        return chamber.volumes(x, v, self.area_a, self.area_b, self.stroke,
+                               self.dead_a, self.dead_b)
 
     def force(self, p_a, p_b):
         """Net pneumatic force along +x, N."""
-        return (_arr(p_a) * self.area_a - _arr(p_b) * self.area_b
-                - self.p_atm * (self.area_a - self.area_b))
+        return piston.pneumatic_force(_arr(p_a), _arr(p_b), self.area_a, self.area_b,
+                                      self.p_atm)
 
     def acceleration(self, v, p_a, p_b):
         """Model acceleration (F - beta v - F_ext)/m, m/s^2 (away from the end stops)."""
@@ -215,7 +216,6 @@ class DriveModel:
         p_a, p_b, G = _arr(p_a), _arr(p_b), _arr(G)
         va, vb, dva, dvb = self.volumes(x, v)
         c = self.polytropic_index
-        rT = R_AIR * self.temperature
         phi_a, in_a, out_a = self.valve.terms(p_a)
         phi_b, in_b, out_b = self.valve.terms(p_b)
         if isinstance(G, float):
@@ -224,15 +224,15 @@ class DriveModel:
         else:
             q_a = phi_a + np.where(G >= 0, in_a, out_a) * G
             q_b = phi_b - np.where(G >= 0, out_b, in_b) * G
-        return (c / va * (rT * q_a - p_a * dva), c / vb * (rT * q_b - p_b * dvb))
+        return (chamber.pressure_rate(p_a, va, dva, q_a, c, self.temperature),
+                chamber.pressure_rate(p_b, vb, dvb, q_b, c, self.temperature))
 
     def chamber_flows(self, x, v, p_a, p_b, dp_a, dp_b):
         """Net mass flows (kg/s) into a and b that give the pressure rates dp_a, dp_b (Pa/s)."""
         va, vb, dva, dvb = self.volumes(x, v)
-        c = self.polytropic_index
-        rT = R_AIR * self.temperature
-        return ((va * np.asarray(dp_a) / c + np.asarray(p_a) * dva) / rT,
-                (vb * np.asarray(dp_b) / c + np.asarray(p_b) * dvb) / rT)
+        c, T = self.polytropic_index, self.temperature
+        return (chamber.inflow_for_pressure_rate(np.asarray(p_a), va, dva, np.asarray(dp_a), c, T),
+                chamber.inflow_for_pressure_rate(np.asarray(p_b), vb, dvb, np.asarray(dp_b), c, T))
 
     def balance_pressure(self) -> float:
         """Pressure (Pa) where the valve fills and exhausts a chamber equally fast,

@@ -54,40 +54,12 @@ import numpy as np
 from ..errors import InputError
 from ..physics import gas, valve
 
-__all__ = ["CommandMap", "FlowCommand", "ValveInversion", "iso6358_flow_numpy",
-           "bracketed_newton"]
+__all__ = ["CommandMap", "FlowCommand", "ValveInversion", "bracketed_newton"]
 
 SIDES = ("a", "b")
 
 
 # ---------------------------------------------------------------------- numeric helpers
-def iso6358_flow_numpy(conductance, b, p1, p2, t1=gas.T_REF, t2=gas.T_REF,
-                       margin: float = gas.LAMINAR_MARGIN) -> np.ndarray:
-    """NumPy twin of :func:`workbench.physics.gas.iso6358_flow` (kg/s, positive 1 -> 2).
-
-    The same formula, laminar patch included, on arrays: a CasADi call costs about
-    half a millisecond here, too slow for element-wise use in a controller. The
-    tests check that both agree to rounding.
-    """
-    p1 = np.asarray(p1, dtype=float)
-    p2 = np.asarray(p2, dtype=float)
-
-    def psi(ratio):
-        x = np.clip(ratio, b, 1.0)
-        y = 1.0 - x
-        m = margin
-        ya = np.abs(y)
-        patch = y * (3.0 * m - ya) / (2.0 * m ** 1.5)
-        root = np.where(ya >= m, np.sqrt(np.maximum(ya, m)) * np.sign(y), patch)
-        sub = np.sqrt(1.0 + x - 2.0 * b) * root / (1.0 - b)
-        return np.where(ratio <= b, 1.0, sub)
-
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fwd = conductance * p1 * gas.RHO_ANR * np.sqrt(gas.T_REF / t1) * psi(p2 / p1)
-        bwd = conductance * p2 * gas.RHO_ANR * np.sqrt(gas.T_REF / t2) * psi(p1 / p2)
-    return np.where(p1 >= p2, fwd, -bwd)
-
-
 def bracketed_newton(fun, target, lo, hi, rtol: float = 1e-13, atol: float = 1e-300,
                      max_iter: int = 100):
     """Solve fun(s) = target for s in [lo, hi] element-wise (guarded Newton).
@@ -193,9 +165,8 @@ class CommandMap:
 
     def opening(self, u):
         """Signed effective opening (-) of command ``u`` (V); arrays allowed."""
-        s = np.clip((np.asarray(u, dtype=float) - self.center - self.offset) / self.span, -1.0, 1.0)
-        d = self.deadband
-        return (s - np.clip(s, -d, d)) / (1.0 - d)
+        s = valve.spool_position(np.asarray(u, dtype=float), self.center, self.span, self.offset)
+        return valve.effective_opening(s, self.deadband)
 
     @property
     def opening_range(self) -> tuple[float, float]:
@@ -389,12 +360,13 @@ class ValveInversion:
             # Horner in plain arithmetic: floats stay floats (fast in a controller),
             # arrays stay arrays
             pn = (p if isinstance(p, float) else np.asarray(p, dtype=float)) / self.pressure_scale
-            return (_horner(self.phi, pn) + 0.0 * pn, _horner(self.psi_in, pn),
-                    _horner(self.psi_out, pn))
+            return (valve.polyval(self.phi, pn) + 0.0 * pn, valve.polyval(self.psi_in, pn),
+                    valve.polyval(self.psi_out, pn))
         p = np.asarray(p, dtype=float)
         T = self.temperature
-        q_in = iso6358_flow_numpy(self.conductance, self.critical_ratio, self.p_s, p, T, T)
-        q_out = iso6358_flow_numpy(self.conductance, self.critical_ratio, p, self.p_atm, T, gas.T_REF)
+        # the physics law itself: on arrays it runs element-wise in numpy
+        q_in = gas.iso6358_flow(self.conductance, self.critical_ratio, self.p_s, p, T, T)
+        q_out = gas.iso6358_flow(self.conductance, self.critical_ratio, p, self.p_atm, T, gas.T_REF)
         return np.zeros_like(p), q_in, q_out
 
     def authority(self, p):
@@ -439,13 +411,7 @@ class ValveInversion:
         s = np.asarray(opening, dtype=float)
         if self.law == "iso6358":
             return s + 0.0
-        mag = np.abs(s)
-        out = np.zeros_like(s)
-        power = np.ones_like(s)
-        for g in self.gamma:
-            out = out + g * s * power
-            power = power * mag
-        return out
+        return valve.gamma_odd(s, self.gamma)
 
     def _gamma_slope(self, s):
         mag = np.abs(s)
@@ -672,13 +638,6 @@ class ValveInversion:
             extra.append(f"null offset {c.offset:.3g} V compensated")
         return (f"{self.source or self.law}; command {c.center:g} +- {c.span:g} V in "
                 f"[{c.u_min:g}, {c.u_max:g}] V" + ("; " + ", ".join(extra) if extra else ""))
-
-
-def _horner(coeffs, x):
-    out = 0.0
-    for c in reversed(coeffs):
-        out = out * x + c
-    return out
 
 
 def _side(side: str) -> str:

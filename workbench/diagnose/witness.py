@@ -28,6 +28,8 @@ from typing import Mapping
 import numpy as np
 from scipy.signal import savgol_coeffs
 
+from ..physics import chamber
+from ..physics.friction import stribeck_level
 from ..physics.gas import R_AIR
 from .data import Prepared
 from .engine import INPUT_ROWS, EngineInputs
@@ -135,7 +137,7 @@ class Witness:
             m = prep.plant.params["load.mass"]
             fc, fs, vs = friction["coulomb"], friction["static"], friction["stribeck_velocity"]
             v = prep.v
-            level = fc + (fs - fc) * np.exp(-(v / vs) ** 2)
+            level = stribeck_level(v, fc, fs, vs)
             moving = ~self.rest
             a_model = dv - np.where(moving, np.sign(v) * level / m, 0.0)
             r = prep.a - prep.smooth_x(a_model)
@@ -175,10 +177,10 @@ class Witness:
         out = {"force": prm["load.mass"] * res["v"]}
         if prep.has_pressures:
             k, T = prm["gas.polytropic_index"], prm["gas.temperature"]
-            A = prep.plant.area_a
-            vol_a = prm["cylinder.dead_volume_a"] + A * prep.xs
-            vol_b = (prm["cylinder.dead_volume_b"]
-                     + prep.plant.area_b * (prep.plant.stroke - prep.xs))
+            plant = prep.plant
+            vol_a, vol_b, _, _ = chamber.volumes(
+                prep.xs, 0.0, plant.area_a, plant.area_b, plant.stroke,
+                prm["cylinder.dead_volume_a"], prm["cylinder.dead_volume_b"])
             out["q_a"] = vol_a / (k * R_AIR * T) * res["p_a"]
             out["q_b"] = vol_b / (k * R_AIR * T) * res["p_b"]
         return out

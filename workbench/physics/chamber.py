@@ -9,13 +9,20 @@ from __future__ import annotations
 
 from .gas import GAMMA, R_AIR
 
-__all__ = ["volumes", "pressure_rate", "pressure_temperature_rates", "chamber_mass"]
+__all__ = ["volumes", "pressure_rate", "inflow_for_pressure_rate",
+           "pressure_temperature_rates", "chamber_mass"]
 
 
 def volumes(x, v, area_a, area_b, stroke, dead_a, dead_b):
     """Chamber volumes and their rates.
 
     V_a = V_a0 + A_a x, V_b = V_b0 + A_b (L - x).
+
+    Parameters
+    ----------
+    x, v : piston position (m) and velocity (m/s).
+    area_a, area_b : piston areas on the a and b sides, m^2.
+    stroke : m. dead_a, dead_b : chamber volumes at x = 0 (a) and x = stroke (b), m^3.
 
     Returns
     -------
@@ -26,8 +33,23 @@ def volumes(x, v, area_a, area_b, stroke, dead_a, dead_b):
 
 
 def pressure_rate(p, volume, volume_rate, q, k, temperature, r=R_AIR):
-    """Polytropic chamber: dp/dt = k/V (r T q - p dV/dt), Pa/s."""
+    """Polytropic chamber: dp/dt = k/V (r T q - p dV/dt), Pa/s.
+
+    Parameters
+    ----------
+    p : Pa. volume : m^3. volume_rate : m^3/s. q : net mass inflow, kg/s.
+    k : polytropic index, -. temperature : K. r : gas constant, J/(kg K).
+    """
     return k / volume * (r * temperature * q - p * volume_rate)
+
+
+def inflow_for_pressure_rate(p, volume, volume_rate, dp, k, temperature, r=R_AIR):
+    """Net mass inflow (kg/s) that gives the pressure rate ``dp`` (Pa/s).
+
+    The inverse of :func:`pressure_rate` in q: q = (V dp/k + p dV/dt) / (r T).
+    Arguments as in :func:`pressure_rate`.
+    """
+    return (volume * dp / k + p * volume_rate) / (r * temperature)
 
 
 def pressure_temperature_rates(p, temp, volume, volume_rate, tq_in, q_in, q_out,
@@ -57,5 +79,5 @@ def pressure_temperature_rates(p, temp, volume, volume_rate, tq_in, q_in, q_out,
 
 
 def chamber_mass(p, volume, temperature, r=R_AIR):
-    """Mass of gas in a chamber, m = p V / (r T), kg."""
+    """Mass of gas in a chamber, m = p V / (r T), kg (p in Pa, volume in m^3, T in K)."""
     return p * volume / (r * temperature)

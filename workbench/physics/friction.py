@@ -8,9 +8,7 @@ velocity decays to exactly zero and stays there), so it does not creep.
 
 from __future__ import annotations
 
-import casadi as ca
-
-from .gas import where
+from . import ops
 
 __all__ = ["stribeck_level", "smooth_friction", "stick_slip_acceleration",
            "STICK_VELOCITY", "STICK_TIME_CONSTANT"]
@@ -22,13 +20,24 @@ STICK_TIME_CONSTANT = 1e-3
 
 
 def stribeck_level(v, coulomb, static, stribeck_velocity):
-    """Dry friction magnitude at speed v: Fc + (Fs - Fc) exp(-(v/vs)^2), N."""
-    return coulomb + (static - coulomb) * ca.exp(-(v / stribeck_velocity) ** 2)
+    """Dry friction magnitude at speed v: Fc + (Fs - Fc) exp(-(v/vs)^2), N.
+
+    Parameters
+    ----------
+    v : velocity, m/s (float, ndarray or casadi expression).
+    coulomb, static : Coulomb and static (break-away) friction levels, N.
+    stribeck_velocity : Stribeck velocity vs, m/s.
+    """
+    return coulomb + (static - coulomb) * ops.exp(-(v / stribeck_velocity) ** 2)
 
 
 def smooth_friction(v, coulomb, static, stribeck_velocity, viscous, v_smooth=1e-3):
-    """Differentiable friction force (N, opposes v): Stribeck level * tanh(v/v_smooth) + beta v."""
-    return (stribeck_level(v, coulomb, static, stribeck_velocity) * ca.tanh(v / v_smooth)
+    """Differentiable friction force (N, opposes v): Stribeck level * tanh(v/v_smooth) + beta v.
+
+    ``v`` in m/s, ``viscous`` in N s/m, ``v_smooth`` (m/s) the width of the tanh
+    sign; the other arguments as in :func:`stribeck_level`.
+    """
+    return (stribeck_level(v, coulomb, static, stribeck_velocity) * ops.tanh(v / v_smooth)
             + viscous * v)
 
 
@@ -47,11 +56,11 @@ def stick_slip_acceleration(v, drive_force, mass, viscous, coulomb, static,
     so a piston at rest stays exactly at rest); otherwise it breaks away against
     the static level. Outside the band friction is the Stribeck curve plus viscous.
     """
-    sgn_v = ca.sign(v)
+    sgn_v = ops.sign(v)
     slip = (drive_force - sgn_v * stribeck_level(v, coulomb, static, stribeck_velocity)
             - viscous * v) / mass
-    breakaway = (drive_force - ca.sign(drive_force) * static) / mass
+    breakaway = (drive_force - ops.sign(drive_force) * static) / mass
     stick = -v / tau
-    in_band = ca.fabs(v) < v_stick
-    held = ca.fabs(drive_force) <= static
-    return where(in_band, where(held, stick, breakaway), slip)
+    in_band = ops.fabs(v) < v_stick
+    held = ops.fabs(drive_force) <= static
+    return ops.where(in_band, ops.where(held, stick, breakaway), slip)

@@ -1,20 +1,20 @@
 """Gas properties and flow through one restriction.
 
-Pure functions: they take plain arguments (floats, numpy scalars, CasADi SX or MX)
-and return an expression of the same kind. Signs: a flow is positive from its first
-pressure argument to its second.
+Pure functions written once on :mod:`workbench.physics.ops`: they take floats,
+numpy arrays (element-wise) or CasADi SX/MX/DM and return a value of the same kind.
+Signs: a flow is positive from its first pressure argument to its second.
 """
 
 from __future__ import annotations
 
 import math
 
-import casadi as ca
+from . import ops
 
 __all__ = [
     "R_AIR", "GAMMA", "T_REF", "P_ATM", "RHO_ANR", "NOZZLE_CRITICAL_RATIO",
     "LAMINAR_MARGIN",
-    "where", "is_symbolic", "smooth_sqrt",
+    "smooth_sqrt",
     "nozzle_cm", "nozzle_flow",
     "iso6358_psi", "iso6358_flow", "speed_of_sound",
 ]
@@ -33,18 +33,9 @@ NOZZLE_CRITICAL_RATIO = (2.0 / (GAMMA + 1.0)) ** (GAMMA / (GAMMA - 1.0))  #: 0.5
 LAMINAR_MARGIN = 0.005
 
 
-def is_symbolic(*args) -> bool:
-    """Whether any argument is a CasADi symbolic type."""
-    return any(isinstance(a, (ca.SX, ca.MX)) for a in args)
-
-
-def where(cond, if_true, if_false):
-    """``if_true`` where ``cond`` holds, else ``if_false``; floats stay floats."""
-    if is_symbolic(cond, if_true, if_false):
-        return ca.if_else(cond, if_true, if_false)
-    if isinstance(cond, ca.DM) or isinstance(if_true, ca.DM) or isinstance(if_false, ca.DM):
-        return ca.if_else(cond, if_true, if_false)
-    return if_true if bool(cond) else if_false
+#: Aliases kept for callers of the former helpers; use :mod:`workbench.physics.ops`.
+is_symbolic = ops.is_symbolic
+where = ops.where
 
 
 def smooth_sqrt(y, margin: float = LAMINAR_MARGIN):
@@ -54,20 +45,14 @@ def smooth_sqrt(y, margin: float = LAMINAR_MARGIN):
     and vanishes at y = 0. Negative ``y`` gives the odd continuation.
     """
     m = margin
-    ya = ca.fabs(y) if is_symbolic(y) else abs(y)
+    ya = ops.fabs(y)
     patch = y * (3.0 * m - ya) / (2.0 * m ** 1.5)
-    return where(ya >= m, ca.sqrt(ca.fmax(ya, m)) * _sign(y), patch)
-
-
-def _sign(y):
-    if is_symbolic(y):
-        return ca.sign(y)
-    return math.copysign(1.0, y) if y != 0 else 0.0
+    return ops.where(ya >= m, ops.sqrt(ops.fmax(ya, m)) * ops.sign(y), patch)
 
 
 def speed_of_sound(temperature=T_REF, gamma: float = GAMMA, r: float = R_AIR):
     """Speed of sound a = sqrt(gamma r T) in m/s."""
-    return ca.sqrt(gamma * r * temperature)
+    return ops.sqrt(gamma * r * temperature)
 
 
 # ---------------------------------------------------------------------- nozzle law
@@ -82,10 +67,11 @@ def nozzle_cm(ratio, gamma: float = GAMMA, r: float = R_AIR):
     b = (2.0 / (gamma + 1.0)) ** (gamma / (gamma - 1.0))
     k = gamma / r * 2.0 / (gamma - 1.0)
     choked = math.sqrt(gamma / r * (2.0 / (gamma + 1.0)) ** ((gamma + 1.0) / (gamma - 1.0)))
-    xs = ca.fmin(ca.fmax(ratio, b), 1.0)
+    xs = ops.clip(ratio, b, 1.0)
     z = 1.0 - xs ** ((gamma - 1.0) / gamma)
-    sub = ca.sqrt(k) * xs ** (1.0 / gamma) * smooth_sqrt(z, LAMINAR_MARGIN * (gamma - 1.0) / gamma)
-    return where(ratio <= b, choked, sub)
+    patch = LAMINAR_MARGIN * (gamma - 1.0) / gamma
+    sub = math.sqrt(k) * xs ** (1.0 / gamma) * smooth_sqrt(z, patch)
+    return ops.where(ratio <= b, choked, sub)
 
 
 def nozzle_flow(area, p1, p2, t1=T_REF, t2=T_REF, discharge: float = 1.0,
@@ -95,9 +81,10 @@ def nozzle_flow(area, p1, p2, t1=T_REF, t2=T_REF, discharge: float = 1.0,
     q_m = A Cq p_up / sqrt(T_up) Cm(p_dw/p_up), with the upstream side chosen by the
     pressures (paper 003, eq. 1).
     """
-    forward = area * discharge * p1 / ca.sqrt(t1) * nozzle_cm(p2 / p1, gamma, r)
-    backward = area * discharge * p2 / ca.sqrt(t2) * nozzle_cm(p1 / p2, gamma, r)
-    return where(p1 >= p2, forward, -backward)
+    with ops.quiet():                  # p = 0 divides in the branch not taken
+        forward = area * discharge * p1 / ops.sqrt(t1) * nozzle_cm(p2 / p1, gamma, r)
+        backward = area * discharge * p2 / ops.sqrt(t2) * nozzle_cm(p1 / p2, gamma, r)
+    return ops.where(p1 >= p2, forward, -backward)
 
 
 # ---------------------------------------------------------------------- ISO 6358
@@ -108,9 +95,9 @@ def iso6358_psi(ratio, b, margin: float = LAMINAR_MARGIN):
     patch of :func:`smooth_sqrt` in (1 - x) near x = 1. Written as
     sqrt(1 + x - 2 b) * sqrt(1 - x) / (1 - b), which equals the ISO form.
     """
-    x = ca.fmin(ca.fmax(ratio, b), 1.0)
-    sub = ca.sqrt(1.0 + x - 2.0 * b) * smooth_sqrt(1.0 - x, margin) / (1.0 - b)
-    return where(ratio <= b, 1.0, sub)
+    x = ops.clip(ratio, b, 1.0)
+    sub = ops.sqrt(1.0 + x - 2.0 * b) * smooth_sqrt(1.0 - x, margin) / (1.0 - b)
+    return ops.where(ratio <= b, 1.0, sub)
 
 
 def iso6358_flow(conductance, b, p1, p2, t1=T_REF, t2=T_REF, margin: float = LAMINAR_MARGIN):
@@ -122,15 +109,25 @@ def iso6358_flow(conductance, b, p1, p2, t1=T_REF, t2=T_REF, margin: float = LAM
 
     Parameters
     ----------
-    conductance : float or casadi expression
+    conductance : float, ndarray or casadi expression
         Sonic conductance C, m^3/(s Pa).
-    b : float or casadi expression
+    b : float, ndarray or casadi expression
         Critical pressure ratio, -.
-    p1, p2 : float or casadi expression
+    p1, p2 : float, ndarray or casadi expression
         Pressures on the two sides, Pa absolute.
-    t1, t2 : float or casadi expression
+    t1, t2 : float, ndarray or casadi expression
         Upstream temperatures for either flow direction, K.
+    margin : float
+        Width of the laminar patch, see :data:`LAMINAR_MARGIN`.
+
+    Returns
+    -------
+    float, ndarray or casadi expression
+        Mass flow, kg/s (numpy arrays broadcast element-wise).
     """
-    forward = conductance * p1 * RHO_ANR * ca.sqrt(T_REF / t1) * iso6358_psi(p2 / p1, b, margin)
-    backward = conductance * p2 * RHO_ANR * ca.sqrt(T_REF / t2) * iso6358_psi(p1 / p2, b, margin)
-    return where(p1 >= p2, forward, -backward)
+    with ops.quiet():                  # p = 0 divides in the branch not taken
+        forward = (conductance * p1 * RHO_ANR * ops.sqrt(T_REF / t1)
+                   * iso6358_psi(p2 / p1, b, margin))
+        backward = (conductance * p2 * RHO_ANR * ops.sqrt(T_REF / t2)
+                    * iso6358_psi(p1 / p2, b, margin))
+    return ops.where(p1 >= p2, forward, -backward)

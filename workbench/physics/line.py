@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import math
 
-import casadi as ca
-
+from . import ops
 from .gas import GAMMA, R_AIR
 
 __all__ = ["AIR_VISCOSITY", "default_segments", "line_rates", "pressure_drop"]
@@ -32,12 +31,11 @@ def pressure_drop(q, p, diameter, seg_length, temperature, r=R_AIR, mu=AIR_VISCO
     Laminar Hagen-Poiseuille plus Blasius: dp = 32 mu L v/d^2 + 0.158 Re^-0.25 rho v|v| L/d,
     written so that it is smooth in q (the |v|^1.75 term has zero slope at v = 0).
     """
-    area = math.pi / 4.0 * diameter ** 2 if not isinstance(diameter, (ca.SX, ca.MX)) \
-        else ca.pi / 4.0 * diameter ** 2
+    area = ops.PI / 4.0 * diameter ** 2
     rho = p / (r * temperature)
     vel = q / (rho * area)
     lam = 32.0 * mu * seg_length * vel / diameter ** 2
-    speed = ca.sqrt(vel * vel + 1e-12)
+    speed = ops.sqrt(vel * vel + 1e-12)
     turb = 0.158 * (rho * diameter / mu) ** -0.25 * rho * vel * speed ** 0.75 * seg_length / diameter
     return lam + turb
 
@@ -59,7 +57,7 @@ def line_rates(p_nodes, q_flows, q_in, p_end, length, diameter, temperature,
     (dp_nodes, dq_flows) as lists.
     """
     n = len(p_nodes)
-    area = ca.pi / 4.0 * diameter ** 2
+    area = ops.PI / 4.0 * diameter ** 2
     seg = length / n
     vol = area * seg
     dp, dq = [], []

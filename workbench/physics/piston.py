@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import casadi as ca
-
-from .gas import where
+from . import ops
 
 __all__ = ["pneumatic_force", "end_stop_force", "STOP_FREQUENCY", "STOP_DAMPING"]
 
@@ -25,10 +23,16 @@ def end_stop_force(x, v, stroke, mass, frequency=STOP_FREQUENCY, damping=STOP_DA
     A stiff spring-damper acting only while the piston is past a stop, stiffness
     m (2 pi f)^2 so that the contact is as fast as ``frequency`` whatever the
     payload; the force only pushes the piston back, never pulls it in.
+
+    Parameters
+    ----------
+    x, v : piston position (m) and velocity (m/s).
+    stroke : m. mass : kg (piston + payload).
+    frequency : contact natural frequency, Hz. damping : contact damping ratio, -.
     """
-    w = 2.0 * ca.pi * frequency
+    w = 2.0 * ops.PI * frequency
     k = mass * w * w
     c = 2.0 * damping * mass * w
-    low = where(x < 0, ca.fmax(-k * x - c * v, 0.0), 0.0)
-    high = where(x > stroke, ca.fmin(-k * (x - stroke) - c * v, 0.0), 0.0)
+    low = ops.where(x < 0, ops.fmax(-k * x - c * v, 0.0), 0.0)
+    high = ops.where(x > stroke, ops.fmin(-k * (x - stroke) - c * v, 0.0), 0.0)
     return low + high

@@ -19,15 +19,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Sequence
 
-import casadi as ca
 import numpy as np
 
-from .gas import T_REF, iso6358_flow, is_symbolic, where
+from . import ops
+from .gas import T_REF, iso6358_flow
 
 __all__ = [
+    "UNDERLAP_LAWS",
     "spool_position",
     "effective_opening",
     "edge_openings",
+    "rounded_edge_openings",
+    "underlap_openings",
     "four_edge_flows",
     "spool_dynamics",
     "polyval",
@@ -39,8 +42,8 @@ __all__ = [
 ]
 
 
-def _clip(v, lo, hi):
-    return ca.fmin(ca.fmax(v, lo), hi)
+#: Underlap laws of a four-edge valve (see :func:`underlap_openings`).
+UNDERLAP_LAWS = ("linear", "rounded")
 
 
 def spool_position(u, center, span, offset=0.0):
@@ -53,7 +56,7 @@ def spool_position(u, center, span, offset=0.0):
     span : |u - center| that opens an edge fully, V.
     offset : null offset, V (the spool is centred at ``center + offset``).
     """
-    return _clip((u - center - offset) / span, -1.0, 1.0)
+    return ops.clip((u - center - offset) / span, -1.0, 1.0)
 
 
 def effective_opening(s, deadband=0.0):
@@ -62,29 +65,75 @@ def effective_opening(s, deadband=0.0):
     opening = sign(s) max(|s| - d, 0) / (1 - d), written as (s - clip(s, -d, d))/(1 - d)
     so that with d = 0 it is exactly s (slope 1 through the centre).
     """
-    if not is_symbolic(deadband) and deadband == 0.0:
+    if not ops.is_symbolic(deadband) and np.ndim(deadband) == 0 and deadband == 0.0:
         # no overlap: the opening is the command itself. (The clip form below would
         # also give s, but its derivative at s = 0 hits the fmin/fmax tie and comes
         # out 0.75 instead of 1 -- wrong for every tangent model at the centre.)
         return s
-    return (s - _clip(s, -deadband, deadband)) / (1.0 - deadband)
+    return (s - ops.clip(s, -deadband, deadband)) / (1.0 - deadband)
 
 
 def edge_openings(opening, underlap=0.0):
-    """(o_plus, o_minus): openings of the S->A/B->E and S->B/A->E edge pairs, in [0, 1].
+    """Linear underlap law: (o_plus, o_minus), the S->A/B->E and S->B/A->E edge openings.
 
-    ``underlap`` adds a symmetric opening to every edge (a leaking centre); the
-    plant uses it only to pin down the equilibrium pressures of a closed-centre
-    valve (see :mod:`workbench.linearize`), never in simulation.
+    o_plus = max(o, 0) + u, o_minus = max(-o, 0) + u for the signed opening o: every
+    edge is ``underlap`` u (fraction of full opening) more open than the ideal
+    closed-centre edge, whatever the spool position (a leaking centre of constant
+    width). With u = 0 the openings are in [0, 1]. The plant uses it only to pin
+    down the equilibrium pressures of a closed-centre valve (see
+    :mod:`workbench.linearize`), never in simulation.
+
+    Parameters
+    ----------
+    opening : signed effective opening, -.
+    underlap : extra opening u of every edge, fraction of full opening, -.
     """
-    mag = ca.fabs(opening) if is_symbolic(opening) else abs(opening)
+    mag = ops.fabs(opening)
     o_plus = 0.5 * (mag + opening) + underlap
     o_minus = 0.5 * (mag - opening) + underlap
     return o_plus, o_minus
 
 
+def rounded_edge_openings(opening, underlap=0.0):
+    """Rounded underlap law: (o_plus, o_minus) = ((r + o)/2, (r - o)/2), r = sqrt(o^2 + d^2).
+
+    The law of the valve-table generator (:mod:`workbench.identify.valve_fit`): at the
+    centre both edges are open d/2, an overlapped edge still passes d^2/(4 |o|) (the
+    clearance leakage that falls with the overlap length) and an open edge tends to
+    o; o_plus - o_minus = o exactly, and the openings are smooth in o. It differs
+    from :func:`edge_openings` (which adds d to every edge at every opening): at the
+    centre d/2 against d, far from it o against o + d. With d = 0 (a plain number)
+    it returns (max(o, 0), max(-o, 0)), the ideal closed-centre edges.
+
+    Parameters
+    ----------
+    opening : signed effective opening o, -.
+    underlap : underlap d of every edge, fraction of full opening, -.
+    """
+    if not ops.is_symbolic(underlap) and np.ndim(underlap) == 0 and underlap == 0.0:
+        return ops.fmax(opening, 0.0), ops.fmax(-opening, 0.0)
+    r = ops.sqrt(opening * opening + underlap * underlap)
+    return 0.5 * (r + opening), 0.5 * (r - opening)
+
+
+def underlap_openings(opening, underlap=0.0, law: str = "linear"):
+    """Edge openings (o_plus, o_minus) under the named underlap law.
+
+    ``law`` is one of :data:`UNDERLAP_LAWS`: ``"linear"`` (:func:`edge_openings`,
+    the plant's default) or ``"rounded"`` (:func:`rounded_edge_openings`).
+    ``opening`` and ``underlap`` are fractions of full opening, -.
+    """
+    if law == "linear":
+        return edge_openings(opening, underlap)
+    if law == "rounded":
+        return rounded_edge_openings(opening, underlap)
+    raise ValueError(f"unknown underlap law {law!r}; expected one of "
+                     + ", ".join(repr(n) for n in UNDERLAP_LAWS))
+
+
 def four_edge_flows(opening, p_s, p_a, p_b, p_atm, conductance, b,
-                    t_supply=T_REF, t_a=T_REF, t_b=T_REF, underlap=0.0):
+                    t_supply=T_REF, t_a=T_REF, t_b=T_REF, underlap=0.0,
+                    underlap_law: str = "linear"):
     """Flows of a 5/3 valve with four ISO 6358 edges of equal conductance.
 
     Parameters
@@ -94,13 +143,15 @@ def four_edge_flows(opening, p_s, p_a, p_b, p_atm, conductance, b,
     conductance : sonic conductance of one fully open edge, m^3/(s Pa).
     b : critical pressure ratio, -.
     t_supply, t_a, t_b : temperatures of the gas leaving supply, A and B, K.
+    underlap : underlap of every edge, fraction of full opening, -.
+    underlap_law : ``"linear"`` or ``"rounded"``, see :func:`underlap_openings`.
 
     Returns
     -------
     q_a, q_b : mass flows into ports A and B, kg/s.
     q_supply : mass flow drawn from the supply, kg/s.
     """
-    o_plus, o_minus = edge_openings(opening, underlap)
+    o_plus, o_minus = underlap_openings(opening, underlap, underlap_law)
     s_to_a = o_plus * iso6358_flow(conductance, b, p_s, p_a, t_supply, t_a)
     a_to_e = o_minus * iso6358_flow(conductance, b, p_a, p_atm, t_a, T_REF)
     s_to_b = o_minus * iso6358_flow(conductance, b, p_s, p_b, t_supply, t_b)
@@ -113,7 +164,7 @@ def spool_dynamics(y, y_dot, u, bandwidth_hz, damping):
 
     ``y`` is the command the spool currently follows (V); returns (y', y'').
     """
-    w = 2.0 * ca.pi * bandwidth_hz
+    w = 2.0 * ops.PI * bandwidth_hz
     return y_dot, w * w * (u - y) - 2.0 * damping * w * y_dot
 
 
@@ -131,7 +182,7 @@ def gamma_odd(du, coeffs):
     Gamma(-du) = -Gamma(du) and Gamma(0) = 0 hold for any coefficients (paper 003:
     a degree-2 Gamma is g1 du + g2 du |du|).
     """
-    mag = ca.fabs(du) if is_symbolic(du) else abs(du)
+    mag = ops.fabs(du)
     out = 0.0
     power = 1.0
     for g in coeffs:
@@ -153,7 +204,7 @@ def affine_flow(p, gamma, phi, psi_in, psi_out, pressure_scale=1e5):
     pressure_scale : Pa per unit of the polynomial variable (1e5: bar).
     """
     pn = p / pressure_scale
-    psi = where(gamma >= 0, polyval(psi_in, pn), polyval(psi_out, pn))
+    psi = ops.where(gamma >= 0, polyval(psi_in, pn), polyval(psi_out, pn))
     return polyval(phi, pn) + psi * gamma
 
 
@@ -197,12 +248,12 @@ def affine_port_flows(opening, p_a, p_b, phi, psi_in, psi_out, gamma,
     g_b = gamma_odd(-opening, gamma)
     q_a = affine_flow(p_a, g_a, phi, psi_in, psi_out, pressure_scale)
     q_b = affine_flow(p_b, g_b, phi, psi_in, psi_out, pressure_scale)
-    if is_symbolic(underlap) or underlap != 0.0:
+    if ops.is_symbolic(underlap) or np.ndim(underlap) != 0 or underlap != 0.0:
         g_full = gamma_odd(1.0, gamma)
         for_p = [p_a / pressure_scale, p_b / pressure_scale]
         leak = [underlap * g_full * (polyval(psi_in, pn) - polyval(psi_out, pn)) for pn in for_p]
         q_a, q_b = q_a + leak[0], q_b + leak[1]
-    q_supply = ca.fmax(q_a, 0.0) + ca.fmax(q_b, 0.0)
+    q_supply = ops.fmax(q_a, 0.0) + ops.fmax(q_b, 0.0)
     return q_a, q_b, q_supply
 
 
@@ -312,11 +363,11 @@ def fit_affine_to_four_edge(conductance: float, b: float, p_s: float, p_atm: flo
     pressures = np.linspace(p_atm, p_s, n_pressure)
     openings = np.linspace(-1.0, 1.0, n_opening)
     pp, oo = (a.ravel() for a in np.meshgrid(pressures, openings, indexing="ij"))
-    q_ref = np.array([float(four_edge_flows(o, p_s, p, p, p_atm, conductance, b,
-                                            temperature, temperature, temperature)[0])
-                      for p, o in zip(pp, oo)])
+    # the laws run element-wise on the whole grid (numpy backend of ops)
+    q_ref = four_edge_flows(oo, p_s, pp, pp, p_atm, conductance, b,
+                            temperature, temperature, temperature)[0]
     pn = pp / pressure_scale
-    g = np.array([float(gamma_odd(float(o), gamma)) for o in oo])
+    g = gamma_odd(oo, gamma)
     inlet = (g >= 0).astype(float)
     n_psi = psi_degree + 1
 
@@ -361,7 +412,7 @@ def fit_affine_to_four_edge(conductance: float, b: float, p_s: float, p_atm: flo
     fit = AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
                          pressure_scale=float(pressure_scale), rms=0.0, max_error=0.0,
                          pressure_range=(float(p_atm), float(p_s)), points=int(len(q_ref)))
-    q_fit = np.array([float(fit.flow(p, o)) for p, o in zip(pp, oo)])
+    q_fit = fit.flow(pp, oo)
     err = q_fit - q_ref
     return AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
                           pressure_scale=float(pressure_scale),

@@ -12,7 +12,8 @@ import numpy as np
 from ...errors import InputError
 from ...params import PlantParams
 from ...physics import gas
-from ...physics.valve import affine_flow, effective_opening, gamma_odd, spool_position
+from ...physics.valve import (affine_flow, effective_opening, gamma_odd, rounded_edge_openings,
+                               spool_position)
 from ._numeric import numeric as _numeric
 from .table import ValveTable
 
@@ -84,12 +85,8 @@ def valve_flow_law(plant_or_params, leakage: float = 0.0) -> Callable:
     d = float(leakage)
 
     def flow(p, u):
-        o = opening(u)
-        if d == 0.0:                                    # exactly the plant's four edges
-            o_in, o_out = ca.fmax(o, 0.0), ca.fmax(-o, 0.0)
-        else:
-            r = ca.sqrt(o * o + d * d)
-            o_in, o_out = 0.5 * (r + o), 0.5 * (r - o)
+        # physics.valve's rounded underlap law (with d = 0 exactly the plant's four edges)
+        o_in, o_out = rounded_edge_openings(opening(u), d)
         return (o_in * gas.iso6358_flow(C, b, p_s, p, T, T)
                 - o_out * gas.iso6358_flow(C, b, p, p_atm, T, T))
     return flow
