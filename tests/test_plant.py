@@ -13,7 +13,7 @@ from workbench.params import PlantParams
 from workbench.physics import gas, valve
 
 from conftest import DATA, EFFECT_KEYS, PLANTS, SPEC_EFFECTS, plant_dict, write_plant
-from conftest import state_scale as _scale
+from conftest import state_scales
 
 BASIC_STATES = (("x", "m"), ("v", "m/s"), ("p_a", "Pa"), ("p_b", "Pa"))
 
@@ -59,8 +59,11 @@ def test_lines_add_four_states_per_segment(tmp_path):
     assert len(extra) == 4 * 3
     assert sorted(n for n, _ in extra) == sorted(
         [f"line_{side}_{kind}{j}" for side in "ab" for kind in "pq" for j in range(3)])
-    assert {u for n, u in extra if "_p" in n} == {"Pa"}
-    assert {u for n, u in extra if "_q" in n} == {"kg/s"}
+    kinds = {sig.name: sig.kind for sig in plant.states}
+    assert {n for n, _ in extra if kinds[n] == "pressure"} == {
+        f"line_{side}_p{j}" for side in "ab" for j in range(3)}
+    assert {u for n, u in extra if kinds[n] == "pressure"} == {"Pa"}
+    assert {u for n, u in extra if kinds[n] == "mass_flow"} == {"kg/s"}
     # Without a segment count the plant chooses one from the length (formats.md).
     plant = Plant.from_toml(write_plant(tmp_path / "q.toml", ["line_dynamics"],
                                         {"lines.length": 10.0}))
@@ -110,7 +113,7 @@ def test_f_vanishes_at_the_operating_point_of_reference_plants(path, x):
     op = linearize.operating_point(plant, x)
     assert op.x == x and op.state[plant.state_index("x")] == x
     f = np.asarray(plant.f(op.state, op.u, plant.p0)).ravel()
-    scales = np.array([_scale(n) for n in plant.state_names])
+    scales = state_scales(plant)
     # A closed-centre valve at its centre passes exactly no flow, and the piston
     # with equal pressures on equal areas feels no force: f is zero up to the
     # roundoff in the solved command (~1e-15 of the span). In one 10 ms sample no
@@ -135,7 +138,7 @@ def _distance_to_equilibrium(plant, op):
     jac = ca.Function("jac_x", [xs], [ca.jacobian(plant.f(xs, op.u, plant.p0), xs)])
     J = np.asarray(jac(op.state))[np.ix_(idx, idx)]
     f = np.asarray(plant.f(op.state, op.u, plant.p0)).ravel()[idx]
-    s = np.array([_scale(names[i]) for i in idx])
+    s = state_scales(plant)[idx]
     step = np.linalg.lstsq(J * s, -f, rcond=None)[0]
     k = int(np.argmax(np.abs(step)))
     return float(abs(step[k])), names[idx[k]]
@@ -176,13 +179,19 @@ def _moving_state(plant, v=0.012):
     vals = {"x": 0.2, "v": v, "p_a": 3.4e5, "p_b": 2.1e5, "spool": 6.5, "spool_rate": 40.0,
             "T_a": 301.0, "T_b": 287.0, "p_s": 5.7e5}
     out = []
-    for n in plant.state_names:
-        if n in vals:
-            out.append(vals[n])
-        elif "_p" in n:
-            out.append((3.6e5 if "_a_" in n else 1.9e5) + 1e3 * int(n[-1]))
+    seen = {"pressure": 0, "mass_flow": 0}   # line states: side a's segments, then side b's
+    n_seg = plant.segments
+    for sig in plant.states:
+        if sig.name in vals:
+            out.append(vals[sig.name])
+            continue
+        k = seen[sig.kind]
+        seen[sig.kind] += 1
+        side_a, j = k < n_seg, k % n_seg
+        if sig.kind == "pressure":
+            out.append((3.6e5 if side_a else 1.9e5) + 1e3 * j)
         else:
-            out.append(4e-4 if "_a_" in n else -3e-4)
+            out.append(4e-4 if side_a else -3e-4)
     return np.array(out)
 
 
@@ -405,7 +414,7 @@ def test_affine_plant_jacobian_matches_central_differences():
     fx = plant.f(xs, us, plant.p0)
     jac = ca.Function("j", [xs, us], [ca.jacobian(fx, xs), ca.jacobian(fx, us)])
     jx, ju = (np.asarray(m) for m in jac(x0, u0))
-    scales = np.array([_scale(n) for n in plant.state_names])
+    scales = state_scales(plant)
     fd = np.zeros((4, 4))
     for i in range(4):
         h = 1e-6 * scales[i]
@@ -428,7 +437,7 @@ def test_affine_plant_operating_point_and_tangent_model_at_mid_stroke():
     f = aff.evaluate_f(op.state, op.u)
     # phi = 0: at the centre no flow at all, equal pressures on equal areas; as for
     # the four-edge plant, no state may drift by 1e-9 of its scale in 10 ms.
-    scales = np.array([_scale(n) for n in aff.state_names])
+    scales = state_scales(aff)
     assert np.max(np.abs(f) * 0.01 / scales) <= 1e-9
     assert op.u == pytest.approx(5.0, abs=1e-9)
     # The pin holds the chambers where the fitted inlet and exhaust gains agree,
