@@ -142,6 +142,9 @@ class Plant:
     f, h : casadi.Function
         State derivative and outputs, both ``(x, u, p)``.
     states, inputs, outputs : tuple of Signal
+        Each with its kind, SI unit, scale and rest value for this plant (see
+        :class:`Signal`; :meth:`signal`, :meth:`states_of_kind`, :meth:`state_scales`,
+        :meth:`rest_state`): no code outside this module reads meaning from names.
     param_names : tuple of str
         Dotted plant-file keys of the entries of ``p``; array keys contribute one
         entry per coefficient, named ``"<key>[i]"`` (e.g. ``"valve.affine_phi[0]"``).

@@ -307,7 +307,7 @@ class _Sweeper:
         bad = ~(np.isfinite(res) & (res < _RESIDUAL_TOL) & np.all(np.isfinite(st), axis=1))
         fallbacks = int(bad.sum())
         if fallbacks:
-            from ..linearize import operating_point
+            from ..equilibrium import operating_point
             for k in np.flatnonzero(bad):
                 try:
                     op = operating_point(self.model, float(positions[k]), p=P[:, k])
@@ -777,7 +777,8 @@ def bench(quick: bool = False) -> dict:
     import control
     import warnings
     from ..controllers import from_plant
-    from ..linearize import operating_point, tangent
+    from ..equilibrium import operating_point
+    from ..linearize import tangent
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     plant = Plant.from_toml(os.path.join(root, "designs", "plants", "situm_rodless.toml"))
     n = 60 if quick else 200
