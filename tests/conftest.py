@@ -48,16 +48,12 @@ EFFECT_KEYS: dict[str, dict[str, dict[str, Any]]] = {
 SPEC_EFFECTS = ("dry_friction", "valve_deadband", "valve_offset", "valve_dynamics",
                 "line_dynamics", "leakage", "supply_droop", "heat_transfer")
 
-#: Typical size of each state, for scaled comparisons and finite-difference steps.
-_STATE_SCALE = {"x": 0.5, "v": 1.0, "p_a": 1e5, "p_b": 1e5, "p_s": 1e5, "spool": 5.0,
-                "spool_rate": 100.0, "T_a": 300.0, "T_b": 300.0}
-
-
-def state_scale(name: str) -> float:
-    """Scale of a state by name: m, m/s, Pa, V, V/s, K; line nodes 1e5 Pa, line flows 1e-3 kg/s."""
-    if name in _STATE_SCALE:
-        return _STATE_SCALE[name]
-    return 1e5 if "_p" in name else 1e-3
+def state_scales(plant) -> "np.ndarray":
+    """Typical size of each state of ``plant`` (SI), for scaled comparisons and
+    finite-difference steps: the plant's own :meth:`workbench.Plant.state_scales`
+    (stroke, 1 m/s, 1e5 Pa, the gas temperature, 1e-3 kg/s, the command span,
+    span x 2 pi x bandwidth for the spool rate)."""
+    return plant.state_scales()
 
 
 CONTROLLER = {"kind": "pd", "sample_time": 0.01, "kp": 20.0, "kd": 1.0}

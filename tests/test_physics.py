@@ -19,7 +19,7 @@ from workbench import Plant, linearize, units
 from workbench.physics import friction, gas, line, supply, valve
 from workbench.simulate import Simulator
 
-from conftest import state_scale as _scale, write_plant
+from conftest import state_scales, write_plant
 
 # Air and ISO 6358 reference conditions, typed from physics.md (not imported).
 R = 287.0
@@ -291,22 +291,23 @@ def _random_state(plant, rng):
         return centre + rng.choice([-1, 1]) * span * rng.uniform(dead + 0.05, 0.9)
 
     out = []
-    for name in plant.state_names:
-        if name == "x":
+    for sig in plant.states:
+        if sig.kind == "position":
             out.append(rng.uniform(0.1, 0.9) * plant.stroke)
-        elif name == "v":
+        elif sig.kind == "velocity":
             out.append(rng.choice([-1, 1]) * rng.uniform(0.05, 0.5))
-        elif name == "spool":
+        elif sig.kind == "spool":
             out.append(command())
-        elif name == "spool_rate":
+        elif sig.kind == "spool_rate":
             out.append(rng.choice([-1, 1]) * rng.uniform(10.0, 100.0))
-        elif name in ("T_a", "T_b"):
+        elif sig.kind == "temperature":
             out.append(rng.uniform(280.0, 320.0))
-        elif name == "p_s":
+        elif sig.kind == "pressure" and sig.part == "supply":
             out.append(rng.uniform(4.5e5, 5.9e5))
-        elif name in ("p_a", "p_b") or "_p" in name:
+        elif sig.kind == "pressure":   # chambers and line nodes
             out.append(rng.uniform(1.5e5, 5e5))
         else:   # line flows
+            assert sig.kind == "mass_flow", sig
             out.append(rng.choice([-1, 1]) * rng.uniform(1e-4, 2e-3))
     return np.array(out), command()
 
@@ -331,7 +332,7 @@ def test_casadi_jacobian_equals_central_differences(tmp_path, case):
     expr = plant.f(xs, us, plant.p0)
     jac = ca.Function("jac_f", [xs, us], [ca.jacobian(expr, xs), ca.jacobian(expr, us)])
     f = lambda x, u: np.asarray(plant.f(x, u, plant.p0)).ravel()   # noqa: E731
-    scales = np.array([_scale(n) for n in plant.state_names] + [plant.params["valve.command_span"]])
+    scales = np.append(state_scales(plant), plant.params["valve.command_span"])
     # Relative step 1e-6 of each state's scale: central differences then carry a
     # truncation error ~ (h/w)^2 (w the width over which f bends, >= 0.5 % of a
     # pressure for the laminar patch, so <= 1e-8) and roundoff ~ eps/1e-6 = 2e-10.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import casadi as ca
@@ -13,7 +14,7 @@ from workbench.params import PlantParams
 from workbench.physics import gas, valve
 
 from conftest import DATA, EFFECT_KEYS, PLANTS, SPEC_EFFECTS, plant_dict, write_plant
-from conftest import state_scale as _scale
+from conftest import state_scales
 
 BASIC_STATES = (("x", "m"), ("v", "m/s"), ("p_a", "Pa"), ("p_b", "Pa"))
 
@@ -59,8 +60,11 @@ def test_lines_add_four_states_per_segment(tmp_path):
     assert len(extra) == 4 * 3
     assert sorted(n for n, _ in extra) == sorted(
         [f"line_{side}_{kind}{j}" for side in "ab" for kind in "pq" for j in range(3)])
-    assert {u for n, u in extra if "_p" in n} == {"Pa"}
-    assert {u for n, u in extra if "_q" in n} == {"kg/s"}
+    kinds = {sig.name: sig.kind for sig in plant.states}
+    assert {n for n, _ in extra if kinds[n] == "pressure"} == {
+        f"line_{side}_p{j}" for side in "ab" for j in range(3)}
+    assert {u for n, u in extra if kinds[n] == "pressure"} == {"Pa"}
+    assert {u for n, u in extra if kinds[n] == "mass_flow"} == {"kg/s"}
     # Without a segment count the plant chooses one from the length (formats.md).
     plant = Plant.from_toml(write_plant(tmp_path / "q.toml", ["line_dynamics"],
                                         {"lines.length": 10.0}))
@@ -110,7 +114,7 @@ def test_f_vanishes_at_the_operating_point_of_reference_plants(path, x):
     op = linearize.operating_point(plant, x)
     assert op.x == x and op.state[plant.state_index("x")] == x
     f = np.asarray(plant.f(op.state, op.u, plant.p0)).ravel()
-    scales = np.array([_scale(n) for n in plant.state_names])
+    scales = state_scales(plant)
     # A closed-centre valve at its centre passes exactly no flow, and the piston
     # with equal pressures on equal areas feels no force: f is zero up to the
     # roundoff in the solved command (~1e-15 of the span). In one 10 ms sample no
@@ -135,7 +139,7 @@ def _distance_to_equilibrium(plant, op):
     jac = ca.Function("jac_x", [xs], [ca.jacobian(plant.f(xs, op.u, plant.p0), xs)])
     J = np.asarray(jac(op.state))[np.ix_(idx, idx)]
     f = np.asarray(plant.f(op.state, op.u, plant.p0)).ravel()[idx]
-    s = np.array([_scale(names[i]) for i in idx])
+    s = state_scales(plant)[idx]
     step = np.linalg.lstsq(J * s, -f, rcond=None)[0]
     k = int(np.argmax(np.abs(step)))
     return float(abs(step[k])), names[idx[k]]
@@ -176,13 +180,19 @@ def _moving_state(plant, v=0.012):
     vals = {"x": 0.2, "v": v, "p_a": 3.4e5, "p_b": 2.1e5, "spool": 6.5, "spool_rate": 40.0,
             "T_a": 301.0, "T_b": 287.0, "p_s": 5.7e5}
     out = []
-    for n in plant.state_names:
-        if n in vals:
-            out.append(vals[n])
-        elif "_p" in n:
-            out.append((3.6e5 if "_a_" in n else 1.9e5) + 1e3 * int(n[-1]))
+    seen = {"pressure": 0, "mass_flow": 0}   # line states: side a's segments, then side b's
+    n_seg = plant.segments
+    for sig in plant.states:
+        if sig.name in vals:
+            out.append(vals[sig.name])
+            continue
+        k = seen[sig.kind]
+        seen[sig.kind] += 1
+        side_a, j = k < n_seg, k % n_seg
+        if sig.kind == "pressure":
+            out.append((3.6e5 if side_a else 1.9e5) + 1e3 * j)
         else:
-            out.append(4e-4 if "_a_" in n else -3e-4)
+            out.append(4e-4 if side_a else -3e-4)
     return np.array(out)
 
 
@@ -405,7 +415,7 @@ def test_affine_plant_jacobian_matches_central_differences():
     fx = plant.f(xs, us, plant.p0)
     jac = ca.Function("j", [xs, us], [ca.jacobian(fx, xs), ca.jacobian(fx, us)])
     jx, ju = (np.asarray(m) for m in jac(x0, u0))
-    scales = np.array([_scale(n) for n in plant.state_names])
+    scales = state_scales(plant)
     fd = np.zeros((4, 4))
     for i in range(4):
         h = 1e-6 * scales[i]
@@ -428,7 +438,7 @@ def test_affine_plant_operating_point_and_tangent_model_at_mid_stroke():
     f = aff.evaluate_f(op.state, op.u)
     # phi = 0: at the centre no flow at all, equal pressures on equal areas; as for
     # the four-edge plant, no state may drift by 1e-9 of its scale in 10 ms.
-    scales = np.array([_scale(n) for n in aff.state_names])
+    scales = state_scales(aff)
     assert np.max(np.abs(f) * 0.01 / scales) <= 1e-9
     assert op.u == pytest.approx(5.0, abs=1e-9)
     # The pin holds the chambers where the fitted inlet and exhaust gains agree,
@@ -512,3 +522,132 @@ def test_summary_reports_the_valve_law():
     # (the fit's error at p_atm, fully open); within 5 %.
     assert aff.full_opening_flow() == pytest.approx(iso.full_opening_flow(), rel=0.05)
     assert "input_affine" in repr(aff)
+
+
+# ====================================================================== signal semantics
+#: Unit of each kind of signal (SI), written out here so the test checks the package.
+_KIND_UNITS = {"position": "m", "velocity": "m/s", "pressure": "Pa", "temperature": "K",
+               "mass_flow": "kg/s", "force": "N", "command": "V", "spool": "V",
+               "spool_rate": "V/s"}
+_STATE_EFFECTS = ("line_dynamics", "valve_dynamics", "heat_transfer", "supply_droop")
+_COMBOS = [c for r in range(len(_STATE_EFFECTS) + 1)
+           for c in itertools.combinations(_STATE_EFFECTS, r)]
+
+
+def _combo_plant(tmp_path, combo):
+    if combo == "affine":
+        return _affine_plant()
+    return Plant.from_toml(write_plant(tmp_path / "p.toml", combo, {"lines.segments": 2}))
+
+
+@pytest.mark.parametrize("combo", _COMBOS, ids=lambda c: "+".join(c) or "basic")
+def test_every_signal_has_kind_unit_scale_and_rest(tmp_path, combo):
+    plant = _combo_plant(tmp_path, combo)
+    for sig in plant.states + plant.outputs + plant.inputs:
+        assert sig.kind in _KIND_UNITS, sig
+        assert sig.unit == _KIND_UNITS[sig.kind], sig
+        assert math.isfinite(sig.scale) and sig.scale > 0, sig
+        assert math.isfinite(sig.rest), sig
+    # Each state has exactly one kind; the helpers agree with the signals.
+    n = len(plant.states)
+    by_kind = sorted(i for k in _KIND_UNITS for i in plant.states_of_kind(k))
+    assert by_kind == list(range(n))
+    assert np.array_equal(plant.state_scales(), [s.scale for s in plant.states])
+    assert all(plant.signal(s.name) is s for s in plant.states)
+    assert plant.signal("q_supply").kind == "mass_flow" and plant.signal("u").kind == "command"
+    with pytest.raises(KeyError, match="no signal"):
+        plant.signal("p_c")
+    # The scales and rests come from the plant file (conftest.BASE: stroke 0.5 m,
+    # span 5 V around 5 V, 293.15 K, supply 6 bar; valve_dynamics: 100 Hz).
+    expect = {"x": (0.5, 0.25), "v": (1.0, 0.0), "u": (5.0, 5.0), "spool": (5.0, 5.0),
+              "spool_rate": (5.0 * 2 * math.pi * 100.0, 0.0), "T_a": (293.15, 293.15),
+              "q_supply": (1e-3, 0.0)}
+    if "supply_droop" in combo:
+        expect["p_s"] = (1e5, 6.0e5)
+    for name, (scale, rest) in expect.items():
+        if name in plant.state_names + plant.output_names + plant.input_names:
+            assert (plant.signal(name).scale, plant.signal(name).rest) == pytest.approx(
+                (scale, rest), rel=1e-15), name
+    # Chambers and line nodes rest at one pressure between atmosphere and supply.
+    held = plant.states_of_kind("pressure", parts=("chamber", "line"))
+    rests = {plant.states[i].rest for i in held}
+    assert len(rests) == 1 and 101325.0 < rests.pop() < 6.0e5
+
+
+@pytest.mark.parametrize("combo", _COMBOS + ["affine"],
+                         ids=lambda c: c if isinstance(c, str) else "+".join(c) or "basic")
+def test_rest_is_the_closed_centre_equilibrium(tmp_path, combo):
+    """A closed-centre valve at its centre, equal pressures on equal areas (rodless,
+    no external force, no leakage): physics says the rest state is an equilibrium."""
+    plant = _combo_plant(tmp_path, combo)
+    rest, u_c = plant.rest_state(), plant.inputs[0].rest
+    scales = plant.state_scales()
+    # Real f: no flow at all at the centre, no force; every row zero up to roundoff.
+    # Criterion as for the operating points above: no state drifts by 1e-9 of its
+    # scale in one 10 ms sample.
+    drift = np.abs(plant.evaluate_f(rest, u_c)) * 0.01 / scales
+    assert np.max(drift) <= 1e-9, plant.state_names[int(np.argmax(drift))]
+    # The pinned valve (every edge leaking PIN_UNDERLAP) holds a chamber only at the
+    # centre balance pressure: the rows of the chamber and line pressures vanish at
+    # rest (brentq solves the balance to 1e-9 Pa, i.e. ~1e-18 of drift) ...
+    f_pin = plant.regularised_f(linearize.PIN_UNDERLAP)
+    held = list(plant.states_of_kind("pressure", parts=("chamber", "line")))
+
+    def pinned_drift(state):
+        f = np.asarray(f_pin(state, u_c, plant.p0)).ravel()
+        return np.max(np.abs(f[held]) * 0.01 / scales[held])
+
+    assert pinned_drift(rest) <= 1e-9
+    # ... and not 0.1 % away from it (measured ~5e-7 there), so the check can fail.
+    off = rest.copy()
+    off[held] *= 1.001
+    assert pinned_drift(plant.rest_state(off, u_c)) >= 1e-7
+    # The solved operating point at the rest position is the rest state. With a
+    # drooping supply the pin's leak lowers the reservoir and with it the pinned
+    # pressures by ~1e-5 of their scale (measured 9.5e-6); else they agree to roundoff.
+    op = linearize.operating_point(plant, rest[plant.state_index("x")])
+    tol = 1e-4 if "supply_droop" in plant.effects else 1e-12
+    assert np.max(np.abs(op.state - rest) / scales) <= tol
+    assert op.u == pytest.approx(u_c, abs=1e-9 * plant.inputs[0].scale)
+
+
+def test_rest_state_takes_followed_signals_and_parameters(tmp_path):
+    plant = Plant.from_toml(write_plant(tmp_path / "p.toml", _STATE_EFFECTS, {"lines.segments": 2}))
+    names = plant.state_names
+    state = np.arange(1.0, len(names) + 1.0) * 1e3          # every state off its rest
+    p = plant.pvec(**{"gas.temperature": 310.0, "supply.pressure": 5.5e5})
+    z = plant.rest_state(state, 6.1, p)
+    expect = dict(zip(names, state[:4]))                      # x, v, p_a, p_b kept
+    expect.update(spool=6.1, spool_rate=0.0, T_a=310.0, T_b=310.0, p_s=5.5e5,
+                  line_a_p0=state[2], line_a_p1=state[2], line_b_p0=state[3],
+                  line_b_p1=state[3], line_a_q0=0.0, line_a_q1=0.0, line_b_q0=0.0,
+                  line_b_q1=0.0)
+    assert dict(zip(names, z)) == pytest.approx(expect, rel=1e-15)
+    # The same on CasADi symbols (the diagnosis engine's quiescent states).
+    zs, us, ps = ca.SX.sym("z", len(names)), ca.SX.sym("u"), ca.SX.sym("p", len(p))
+    fun = ca.Function("rest", [zs, us, ps], [plant.rest_state(zs, us, ps)])
+    assert np.array_equal(np.asarray(fun(state, 6.1, p)).ravel(), z)
+    # Defaults: nominal parameters and the valve centre.
+    z0 = plant.rest_state()
+    assert z0[names.index("spool")] == 5.0 and z0[names.index("T_a")] == 293.15
+
+
+def test_plant_and_equilibrium_form_no_import_circle():
+    """equilibrium.py imports plant for type hints only; plant.py never imports linearize."""
+    import ast
+    import workbench.equilibrium as eq_mod
+    import workbench.plant as plant_mod
+
+    def runtime_imports(module):
+        tree = ast.parse(open(module.__file__, encoding="utf-8").read())
+        skip = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+                skip |= {id(n) for n in ast.walk(node)}
+        return {(getattr(n, "module", None) or "") + ":" + ",".join(a.name for a in n.names)
+                for n in ast.walk(tree)
+                if isinstance(n, (ast.Import, ast.ImportFrom)) and id(n) not in skip}
+
+    eq_imports = runtime_imports(eq_mod)
+    assert not any("plant" in i or "linearize" in i for i in eq_imports), eq_imports
+    assert not any("linearize" in i for i in runtime_imports(plant_mod))

@@ -4,7 +4,7 @@ One symbolic CasADi model of the drive (valve, chambers, piston, friction, lines
 leakage, supply) serves simulation, exact linearisation, identification and control.
 """
 
-from . import controllers, linearize, physics, simulate, units
+from . import controllers, equilibrium, linearize, physics, simulate, units
 from .errors import InputError, WorkbenchError
 from .params import PlantParams
 from .plant import Plant
@@ -17,7 +17,7 @@ _LAZY = ("stability", "validate", "report", "identify", "diagnose", "plots", "re
 
 __all__ = [
     "InputError", "WorkbenchError", "Plant", "PlantParams",
-    "controllers", "linearize", "physics", "simulate", "units", "__version__", *_LAZY,
+    "controllers", "equilibrium", "linearize", "physics", "simulate", "units", "__version__", *_LAZY,
 ]
 
 

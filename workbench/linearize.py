@@ -1,4 +1,8 @@
-"""Equilibria, exact tangent models and the reduced position model of paper 000.
+"""Exact tangent models and the reduced position model of paper 000.
+
+Operating points (equilibria) are computed by :mod:`workbench.equilibrium`; its
+names (``operating_point``, ``OperatingPoint``, ``centre_balance_pressure``,
+``PIN_UNDERLAP``) are re-exported here.
 
 All derivatives come from CasADi (automatic differentiation of the symbolic plant),
 never from finite differences.
@@ -23,6 +27,8 @@ import casadi as ca
 import numpy as np
 from scipy import optimize
 
+from .equilibrium import (PIN_UNDERLAP, RATE_PER_SCALE, OperatingPoint, centre_balance_pressure,
+                          operating_point)
 from .errors import InputError, WorkbenchError
 from .physics import gas
 from .plant import Plant
@@ -32,178 +38,8 @@ __all__ = [
     "operating_point", "tangent", "reduced_position_model",
     "paper000_w0", "paper000_zeta", "paper000_kv_from_flow",
     "centre_balance_pressure", "tank_equilibrium", "tank_tangent",
+    "PIN_UNDERLAP", "RATE_PER_SCALE",
 ]
-
-#: Edge leakage (fraction of full opening) used only to pin the equilibrium
-#: pressures of a closed-centre valve; small enough that the pressures equal the
-#: zero-leak limit to ~1e-6 relative.
-PIN_UNDERLAP = 1e-4
-
-_SCALES = {"x": 0.1, "v": 0.1, "p_a": 1e5, "p_b": 1e5, "spool": 1.0, "spool_rate": 100.0,
-           "T_a": 300.0, "T_b": 300.0, "p_s": 1e5}
-
-
-def _scale_of(name: str) -> float:
-    if name in _SCALES:
-        return _SCALES[name]
-    if "_p" in name:
-        return 1e5
-    if "_q" in name:
-        return 1e-3
-    return 1.0
-
-
-@dataclass(frozen=True)
-class OperatingPoint:
-    """An equilibrium of the plant: piston at rest at ``x`` under command ``u``.
-
-    Attributes
-    ----------
-    x : position, m. u : command, V. p_a, p_b : chamber pressures, Pa.
-    state : full state vector. params : parameter vector used.
-    residual : largest |xdot_i| / scale_i at the point (should be ~0).
-    """
-
-    x: float
-    u: float
-    p_a: float
-    p_b: float
-    state: np.ndarray
-    params: np.ndarray
-    residual: float
-    state_names: tuple[str, ...] = ()
-
-    def as_dict(self) -> dict:
-        return {"x": self.x, "u": self.u, "p_a": self.p_a, "p_b": self.p_b,
-                "state": dict(zip(self.state_names, map(float, self.state))),
-                "residual": self.residual}
-
-
-def centre_balance_pressure(p_s: float, p_atm: float, b: float, t: float = gas.T_REF) -> float:
-    """Pressure at which equal openings to supply and to exhaust pass equal flow, Pa.
-
-    This is where a closed-centre valve with vanishing symmetric leakage holds a
-    chamber, and the pressure at which the valve's one-sided flow gains agree, so
-    the tangent model at the centre is well defined there.
-    """
-    def g(p):
-        return (gas.iso6358_flow(1.0, b, p_s, p, t, t) - gas.iso6358_flow(1.0, b, p, p_atm, t, t))
-    return optimize.brentq(lambda p: float(g(p)), p_atm * (1 + 1e-9), p_s * (1 - 1e-9),
-                           xtol=1e-9, rtol=1e-14)
-
-
-def operating_point(plant: Plant, x: float, p: Sequence[float] | None = None,
-                    u_guess: float | None = None) -> OperatingPoint:
-    """Equilibrium of the plant with the piston at rest at ``x`` (m).
-
-    Unknowns are the command and every state but the position (velocity fixed at
-    zero); equations are all state derivatives but dx/dt. Dry friction is left out
-    (at rest it can hold any force below break-away, so it does not pin anything),
-    and every valve edge gets a vanishing leakage (:data:`PIN_UNDERLAP`) so that the
-    pressures of a closed-centre valve are the zero-leak limit rather than arbitrary.
-
-    Raises
-    ------
-    InputError
-        ``x`` outside the stroke.
-    WorkbenchError
-        No equilibrium found (e.g. an external force the valve cannot hold).
-    """
-    if not 0.0 <= x <= plant.stroke:
-        raise InputError(f"position {x:g} m is outside the stroke [0, {plant.stroke:g}] m",
-                         location="--x")
-    prm = plant.params
-    pv = np.asarray(plant.p0 if p is None else p, dtype=float)
-    model = plant.with_friction("smooth") if prm.has_effect("dry_friction") else plant
-    f_reg = model.regularised_f(PIN_UNDERLAP)
-    names = plant.state_names
-    n = len(names)
-    free = [i for i in range(n) if names[i] not in ("x", "v")]
-    eqs = [i for i in range(n) if names[i] != "x"]
-    xs = np.array([_scale_of(names[i]) for i in free])
-    fs = np.array([_scale_of(names[i]) * 100.0 for i in eqs])  # ~1 % of scale per 10 ms
-    center = prm["valve.command_center"] + prm.get("valve.null_offset", 0.0)
-    span = prm["valve.command_span"]
-
-    z = ca.SX.sym("z", len(free) + 1)
-    full = [0.0] * n
-    full[names.index("x")] = x
-    for j, i in enumerate(free):
-        full[i] = z[j] * xs[j]
-    u_sym = center + z[-1] * span
-    anchor = ca.SX.sym("anchor", z.numel())
-
-    def residual_function(fun_x):
-        """Scaled xdot rows, then weak rows: u towards the centre and every unknown
-        towards ``anchor`` (the pinned solution), so that directions the real model
-        leaves undetermined (closed centre: the pressure level) stay where the
-        pinned model put them instead of drifting to nonsense."""
-        xdot = fun_x(ca.vertcat(*full), u_sym, pv)
-        res = ca.vertcat(*[xdot[i] / fs[k] for k, i in enumerate(eqs)], 1e-6 * z[-1],
-                         1e-8 * (z[:-1] - anchor[:-1]))
-        fun = ca.Function("res", [z, anchor], [res, ca.jacobian(res, z)])
-        return lambda zz, ref=None: fun(zz, zz if ref is None else ref)
-
-    rf = residual_function(f_reg)
-    rf_real_anchored = residual_function(model.f)
-
-    p_e = centre_balance_pressure(prm["supply.pressure"], prm["gas.atmospheric_pressure"],
-                                  prm["valve.critical_pressure_ratio"], prm["gas.temperature"])
-    guess = np.zeros(len(free) + 1)
-    for j, i in enumerate(free):
-        nm = names[i]
-        if nm in ("p_a", "p_b") or nm.startswith("line_a_p") or nm.startswith("line_b_p"):
-            guess[j] = p_e / xs[j]
-        elif nm in ("T_a", "T_b"):
-            guess[j] = prm["gas.temperature"] / xs[j]
-        elif nm == "spool":
-            guess[j] = (center if u_guess is None else u_guess) / xs[j]
-        elif nm == "p_s":
-            guess[j] = prm["supply.pressure"] / xs[j]
-    if u_guess is not None:
-        guess[-1] = (u_guess - center) / span
-
-    n_eq = len(eqs)
-
-    def solve(resfun, start):
-        sol = optimize.least_squares(lambda zz: np.asarray(resfun(zz)[0]).ravel(), start,
-                                     jac=lambda zz: np.asarray(resfun(zz)[1]), method="lm",
-                                     xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
-        return sol.x, float(np.max(np.abs(np.asarray(resfun(sol.x)[0]).ravel()[:n_eq])))
-
-    # 1) the pinned model: well posed even for a closed centre without leakage
-    zz, _ = solve(rf, guess)
-    # 2) refine on the real model from there. Without leakage the pinned point already
-    #    satisfies it (the step is ~0); with physical leakage the real balance differs
-    #    from the pinned one and this step moves to it.
-    #    A leak-dominated closed centre settles far away (at atmosphere), so a
-    #    second start there is tried as well; the smaller residual wins.
-    pinned = zz.copy()
-    zz_real, resid = solve(lambda q: rf_real_anchored(q, pinned), zz)
-    if resid > 1e-9:
-        start = zz.copy()
-        for j, i in enumerate(free):
-            nm = names[i]
-            if nm in ("p_a", "p_b") or nm.startswith("line_a_p") or nm.startswith("line_b_p"):
-                start[j] = prm["gas.atmospheric_pressure"] / xs[j]
-        zz_alt, resid_alt = solve(lambda q, a=start.copy(): rf_real_anchored(q, a), start)
-        if resid_alt < resid:
-            zz_real, resid = zz_alt, resid_alt
-    if np.all(np.isfinite(zz_real)):
-        zz = zz_real
-    state = np.zeros(n)
-    state[names.index("x")] = x
-    for j, i in enumerate(free):
-        state[i] = zz[j] * xs[j]
-    u = center + zz[-1] * span
-    if not np.all(np.isfinite(state)) or resid > 1e-6:
-        raise WorkbenchError(
-            f"no equilibrium found at x = {x:g} m (largest scaled residual {resid:.2g}); "
-            "can the valve hold the load there within its command range?")
-    return OperatingPoint(x=float(x), u=float(u), p_a=float(state[names.index("p_a")]),
-                          p_b=float(state[names.index("p_b")]), state=state, params=pv,
-                          residual=resid, state_names=names)
-
 
 @dataclass(frozen=True)
 class TangentModel:

@@ -28,40 +28,101 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 
-from .errors import InputError
+from . import equilibrium
 from .params import SCHEMA, PlantParams
 from .physics import chamber, friction, gas, line, piston, supply, valve
 
-__all__ = ["Signal", "Plant", "OUTPUT_SIGNALS"]
+__all__ = ["Signal", "Plant", "OUTPUT_SIGNALS", "KINDS", "PRESSURE_SCALE", "VELOCITY_SCALE",
+           "FLOW_SCALE"]
+
+
+#: Kinds of signal, each with its SI unit (:attr:`Signal.kind`).
+KINDS: dict[str, str] = {
+    "position": "m", "velocity": "m/s", "pressure": "Pa", "temperature": "K",
+    "mass_flow": "kg/s", "force": "N", "command": "V", "spool": "V", "spool_rate": "V/s",
+}
+
+#: Scale of every pressure, Pa: 1 bar, the resolution at which a rig engineer reads them.
+PRESSURE_SCALE = 1e5
+#: Scale of the piston velocity, m/s: the order of a servo-pneumatic drive's top speed.
+VELOCITY_SCALE = 1.0
+#: Scale of every mass flow, kg/s: 1 g/s (~50 l/min ANR), the order of a servo valve's
+#: flow near its centre (a fully open valve passes 4-40 g/s on the reference plants).
+FLOW_SCALE = 1e-3
 
 
 @dataclass(frozen=True)
 class Signal:
-    """Name, SI unit and meaning of a state, input or output."""
+    """Name, SI unit and meaning of a state, input or output.
+
+    Attributes
+    ----------
+    name : str
+    unit : str
+        SI unit (that of :data:`KINDS` for its kind).
+    doc : str
+    kind : str
+        What it measures, a key of :data:`KINDS` (``"position"``, ``"pressure"``, ...).
+    scale : float
+        Its typical magnitude for this plant, in ``unit``: **the magnitude used to
+        scale tolerances and residuals** (integrator tolerances, equilibrium
+        residuals, least-squares weights, finite-difference steps). Stroke for the
+        position, :data:`VELOCITY_SCALE`, :data:`PRESSURE_SCALE`, :data:`FLOW_SCALE`,
+        the gas temperature for temperatures, the command span for the command and
+        spool, span x 2 pi x bandwidth for the spool rate, the full-supply force on
+        side a for forces.
+    rest : float
+        Its value at rest for the nominal parameters, in ``unit``: mid-stroke, zero
+        velocity and flows, chamber and line pressures at the centre balance of the
+        valve (:func:`workbench.equilibrium.rest_pressure`), temperatures the gas
+        temperature, the command and spool the valve centre
+        (``command_center + null_offset``), the supply its set pressure.
+    part : str
+        Part of the drive: ``"piston"``, ``"chamber"``, ``"line"``, ``"valve"`` or ``"supply"``.
+    effect : str
+        The effect that adds this state (``"valve_dynamics"``, ``"heat_transfer"``,
+        ``"line_dynamics"``, ``"supply_droop"``); ``""`` for the basic drive's
+        signals (x, v, p_a, p_b, the command, the outputs).
+    follows : str
+        Name of the state or input whose value this one takes at rest
+        (``"p_a"`` for the nodes of line a, ``"u"`` for the spool), or ``""``.
+    rest_key : str
+        Plant-file key whose value is the rest value (``"gas.temperature"``,
+        ``"supply.pressure"``), or ``""``.
+    """
 
     name: str
     unit: str
     doc: str = ""
+    kind: str = ""
+    scale: float = 1.0
+    rest: float = 0.0
+    part: str = ""
+    effect: str = ""
+    follows: str = ""
+    rest_key: str = ""
 
 
-#: Outputs of every plant, in the order of ``h``.
+#: Outputs of every plant, in the order of ``h`` (names, units and meanings; a
+#: plant's :attr:`Plant.outputs` carry its scales and rest values as well).
 OUTPUT_SIGNALS: tuple[Signal, ...] = (
-    Signal("x", "m", "piston position"),
-    Signal("v", "m/s", "piston velocity"),
-    Signal("p_a", "Pa", "pressure in chamber a"),
-    Signal("p_b", "Pa", "pressure in chamber b"),
-    Signal("p_s", "Pa", "supply pressure at the valve"),
-    Signal("q_supply", "kg/s", "mass flow drawn from the supply"),
-    Signal("force", "N", "net pneumatic force on the piston"),
+    Signal("x", "m", "piston position", "position", part="piston"),
+    Signal("v", "m/s", "piston velocity", "velocity", part="piston"),
+    Signal("p_a", "Pa", "pressure in chamber a", "pressure", part="chamber"),
+    Signal("p_b", "Pa", "pressure in chamber b", "pressure", part="chamber"),
+    Signal("p_s", "Pa", "supply pressure at the valve", "pressure", part="supply",
+           rest_key="supply.pressure"),
+    Signal("q_supply", "kg/s", "mass flow drawn from the supply", "mass_flow", part="supply"),
+    Signal("force", "N", "net pneumatic force on the piston", "force", part="piston"),
 )
 
-_INPUTS = (Signal("u", "V", "valve command"),)
+_INPUTS = (Signal("u", "V", "valve command", "command", part="valve"),)
 
 
 class Plant:
@@ -81,6 +142,9 @@ class Plant:
     f, h : casadi.Function
         State derivative and outputs, both ``(x, u, p)``.
     states, inputs, outputs : tuple of Signal
+        Each with its kind, SI unit, scale and rest value for this plant (see
+        :class:`Signal`; :meth:`signal`, :meth:`states_of_kind`, :meth:`state_scales`,
+        :meth:`rest_state`): no code outside this module reads meaning from names.
     param_names : tuple of str
         Dotted plant-file keys of the entries of ``p``; array keys contribute one
         entry per coefficient, named ``"<key>[i]"`` (e.g. ``"valve.affine_phi[0]"``).
@@ -115,9 +179,9 @@ class Plant:
         if params.has_effect("line_dynamics"):
             self.segments = int(params.get("lines.segments")
                                 or line.default_segments(params["lines.length"]))
-        self.states = self._state_signals()
-        self.inputs = _INPUTS
-        self.outputs = OUTPUT_SIGNALS
+        self.states = self._valued(self._state_signals())
+        self.inputs = self._valued(_INPUTS)
+        self.outputs = self._valued(OUTPUT_SIGNALS)
         nx, npar = len(self.states), len(self.param_names)
         self.x_sym = ca.SX.sym("x", nx)
         self.u_sym = ca.SX.sym("u", 1)
@@ -183,24 +247,123 @@ class Plant:
                            f"{', '.join(self.param_names)}") from None
 
     def _state_signals(self) -> tuple[Signal, ...]:
-        s = [Signal("x", "m", "piston position"), Signal("v", "m/s", "piston velocity"),
-             Signal("p_a", "Pa", "pressure in chamber a"),
-             Signal("p_b", "Pa", "pressure in chamber b")]
+        """The state signals (kind, part, effect, rest rule); scales and rests are
+        filled in by :meth:`_valued`."""
+        s = [Signal("x", "m", "piston position", "position", part="piston"),
+             Signal("v", "m/s", "piston velocity", "velocity", part="piston"),
+             Signal("p_a", "Pa", "pressure in chamber a", "pressure", part="chamber"),
+             Signal("p_b", "Pa", "pressure in chamber b", "pressure", part="chamber")]
         prm = self.params
         if prm.has_effect("valve_dynamics"):
-            s += [Signal("spool", "V", "command the spool currently follows"),
-                  Signal("spool_rate", "V/s", "its rate")]
+            eff = "valve_dynamics"
+            s += [Signal("spool", "V", "command the spool currently follows", "spool",
+                         part="valve", effect=eff, follows="u"),
+                  Signal("spool_rate", "V/s", "its rate", "spool_rate", part="valve",
+                         effect=eff)]
         if prm.has_effect("heat_transfer"):
-            s += [Signal("T_a", "K", "gas temperature in chamber a"),
-                  Signal("T_b", "K", "gas temperature in chamber b")]
+            s += [Signal(f"T_{c}", "K", f"gas temperature in chamber {c}", "temperature",
+                         part="chamber", effect="heat_transfer", rest_key="gas.temperature")
+                  for c in ("a", "b")]
         for side in ("a", "b"):
-            s += [Signal(f"line_{side}_p{j}", "Pa", f"pressure of line {side} node {j}")
+            s += [Signal(f"line_{side}_p{j}", "Pa", f"pressure of line {side} node {j}",
+                         "pressure", part="line", effect="line_dynamics", follows=f"p_{side}")
                   for j in range(self.segments)]
-            s += [Signal(f"line_{side}_q{j}", "kg/s", f"mass flow of line {side} segment {j}")
+            s += [Signal(f"line_{side}_q{j}", "kg/s", f"mass flow of line {side} segment {j}",
+                         "mass_flow", part="line", effect="line_dynamics")
                   for j in range(self.segments)]
         if prm.has_effect("supply_droop"):
-            s += [Signal("p_s", "Pa", "reservoir (supply) pressure")]
+            s += [Signal("p_s", "Pa", "reservoir (supply) pressure", "pressure", part="supply",
+                         effect="supply_droop", rest_key="supply.pressure")]
         return tuple(s)
+
+    def _valued(self, signals: Sequence[Signal]) -> tuple[Signal, ...]:
+        """``signals`` with this plant's scale and rest value (see :class:`Signal`)."""
+        prm = self.params
+        span = float(prm["valve.command_span"])
+        centre = float(prm["valve.command_center"]) + float(prm.get("valve.null_offset", 0.0))
+        p_s, p_atm = float(prm["supply.pressure"]), float(prm["gas.atmospheric_pressure"])
+        p_rest = equilibrium.rest_pressure(prm)
+        scale = {"position": self.stroke, "velocity": VELOCITY_SCALE,
+                 "pressure": PRESSURE_SCALE, "temperature": float(prm["gas.temperature"]),
+                 "mass_flow": FLOW_SCALE, "force": (p_s - p_atm) * self.area_a,
+                 "command": span, "spool": span}
+        if prm.has_effect("valve_dynamics"):
+            scale["spool_rate"] = span * 2.0 * math.pi * float(prm["valve.bandwidth"])
+        rest = {"position": 0.5 * self.stroke, "pressure": p_rest, "command": centre,
+                "spool": centre,
+                "force": piston.pneumatic_force(p_rest, p_rest, self.area_a, self.area_b, p_atm)}
+        out = []
+        for sig in signals:
+            value = float(prm[sig.rest_key]) if sig.rest_key else rest.get(sig.kind, 0.0)
+            out.append(replace(sig, scale=float(scale[sig.kind]), rest=float(value)))
+        return tuple(out)
+
+    def signal(self, name: str) -> Signal:
+        """The state, output or input called ``name`` (a state first: ``p_s`` is both a
+        state, with supply droop, and an output; both have the same meaning)."""
+        for group in (self.states, self.outputs, self.inputs):
+            for sig in group:
+                if sig.name == name:
+                    return sig
+        raise KeyError(f"no signal '{name}'; states: {', '.join(self.state_names)}; outputs: "
+                       f"{', '.join(self.output_names)}; inputs: {', '.join(self.input_names)}")
+
+    def states_of_kind(self, kind: str, parts: Sequence[str] | None = None) -> tuple[int, ...]:
+        """Indices of the states of ``kind`` (a key of :data:`KINDS`), optionally only
+        those of the given ``parts`` (``"piston"``, ``"chamber"``, ``"line"``,
+        ``"valve"``, ``"supply"``)."""
+        if kind not in KINDS:
+            raise KeyError(f"unknown signal kind '{kind}'; kinds: {', '.join(KINDS)}")
+        return tuple(i for i, s in enumerate(self.states)
+                     if s.kind == kind and (parts is None or s.part in parts))
+
+    def state_scales(self) -> np.ndarray:
+        """:attr:`Signal.scale` of every state, in state order (SI units)."""
+        return np.array([s.scale for s in self.states])
+
+    def output_scales(self) -> np.ndarray:
+        """:attr:`Signal.scale` of every output, in output order (SI units)."""
+        return np.array([s.scale for s in self.outputs])
+
+    def rest_state(self, state: Any = None, u: Any = None, p: Any = None) -> Any:
+        """A state whose effect states are at rest given the basic ones.
+
+        The basic states (x, v, p_a, p_b: :attr:`Signal.effect` empty) are taken from
+        ``state`` (default: their :attr:`Signal.rest`); every state an effect adds takes
+        its rest value: the value of the signal it :attr:`Signal.follows` (line nodes
+        their chamber's pressure, the spool the command ``u``), the parameter named by
+        :attr:`Signal.rest_key` (temperatures, reservoir), otherwise its ``rest``
+        (flows and the spool rate: 0).
+
+        Parameters
+        ----------
+        state : sequence of float or casadi vector, optional
+            A full state (SI); only its basic entries are read.
+        u : float or casadi scalar, optional
+            Command, V (default: the valve centre).
+        p : parameter vector, optional
+            Read for :attr:`Signal.rest_key` (default: the plant's nominal values).
+
+        Returns
+        -------
+        numpy.ndarray, or a casadi column when any argument is symbolic.
+        """
+        values: dict[str, Any] = {"u": self.inputs[0].rest if u is None else u}
+        out: list[Any] = []
+        for i, sig in enumerate(self.states):
+            if not sig.effect:
+                val = sig.rest if state is None else state[i]
+            elif sig.follows:
+                val = values[sig.follows]
+            elif sig.rest_key and p is not None and sig.rest_key in self.param_names:
+                val = p[self.param_index(sig.rest_key)]
+            else:
+                val = sig.rest
+            values[sig.name] = val
+            out.append(val)
+        if any(isinstance(v, (ca.SX, ca.MX, ca.DM)) for v in out):
+            return ca.vertcat(*out)
+        return np.array(out, dtype=float)
 
     # ---------------------------------------------------------------- geometry
     @property
@@ -370,7 +533,7 @@ class Plant:
         fully open inlet minus the outflow of a fully open exhaust, scaled), which
         pins a closed centre (phi = 0) at the pressure where the fitted inlet and
         exhaust gains agree, as the four-edge leak does. Where phi is a real leakage
-        it dominates this term and :func:`workbench.linearize.operating_point`'s
+        it dominates this term and :func:`workbench.equilibrium.operating_point`'s
         refinement on the real ``f`` moves to phi's balance.
         """
         xdot, _ = self._build(self.x_sym, self.u_sym, self.p_sym, self.friction, underlap)
@@ -391,34 +554,15 @@ class Plant:
 
     def initial_state(self, x0: float, p_a: float | None = None, p_b: float | None = None,
                       v0: float = 0.0, u0: float | None = None) -> np.ndarray:
-        """A consistent state at position ``x0`` (m).
+        """A consistent state at position ``x0`` (m): see :func:`workbench.equilibrium.initial_state`.
 
         Pressures default to the equilibrium of the valve at rest at ``x0``
-        (:func:`workbench.linearize.operating_point`); line nodes take their
-        chamber's pressure, line flows zero, temperatures the gas temperature, the
-        spool the command ``u0`` (default: the equilibrium command) and the supply
-        its set pressure.
+        (:func:`workbench.equilibrium.operating_point`); the states effects add take
+        their rest values (:meth:`rest_state`): line nodes their chamber's pressure,
+        line flows zero, temperatures the gas temperature, the spool the command
+        ``u0`` (default: the equilibrium command) and the supply its set pressure.
         """
-        if not 0.0 <= x0 <= self.stroke:
-            raise InputError(f"initial position {x0:g} m is outside the stroke [0, {self.stroke:g}] m")
-        if p_a is None or p_b is None or u0 is None:
-            from .linearize import operating_point
-            op = operating_point(self, x0)
-            p_a = op.p_a if p_a is None else p_a
-            p_b = op.p_b if p_b is None else p_b
-            u0 = op.u if u0 is None else u0
-        z = {"x": x0, "v": v0, "p_a": p_a, "p_b": p_b, "spool": u0, "spool_rate": 0.0,
-             "T_a": self.params["gas.temperature"], "T_b": self.params["gas.temperature"],
-             "p_s": self.params["supply.pressure"]}
-        out = np.zeros(len(self.states))
-        for i, s in enumerate(self.states):
-            if s.name in z:
-                out[i] = z[s.name]
-            elif s.name.startswith("line_a_p"):
-                out[i] = p_a
-            elif s.name.startswith("line_b_p"):
-                out[i] = p_b
-        return out
+        return equilibrium.initial_state(self, x0, p_a=p_a, p_b=p_b, v0=v0, u0=u0)
 
     def evaluate_f(self, x: Sequence[float], u: float, p: Sequence[float] | None = None) -> np.ndarray:
         """Numeric state derivative."""

@@ -35,28 +35,6 @@ DEFAULT_RTOL = 1e-7  #: CVODES relative tolerance
 DEFAULT_ATOL = 1e-9  #: CVODES absolute tolerance on the scaled states
 
 
-def _scales(plant: Plant) -> np.ndarray:
-    out = []
-    for name in plant.state_names:
-        if name == "x":
-            out.append(plant.stroke)
-        elif name == "v":
-            out.append(1.0)
-        elif name in ("p_a", "p_b", "p_s") or "_p" in name:
-            out.append(1e5)
-        elif name in ("T_a", "T_b"):
-            out.append(300.0)
-        elif "_q" in name:
-            out.append(1e-3)
-        elif name == "spool":
-            out.append(10.0)
-        elif name == "spool_rate":
-            out.append(1e4)
-        else:
-            out.append(1.0)
-    return np.array(out)
-
-
 @dataclass(frozen=True)
 class Trajectory:
     """Result of a simulation: samples of states, command, outputs and reference.
@@ -184,7 +162,7 @@ class Simulator:
         self.params = np.asarray(plant.p0 if params is None else params, dtype=float)
         if self.params.shape != plant.p0.shape:
             raise InputError(f"expected {len(plant.p0)} parameters, got {self.params.shape}")
-        self.scale = _scales(plant)
+        self.scale = plant.state_scales()   # CVODES integrates state / scale
         self.rtol, self.atol = rtol, atol
         self._integrators: dict[int, ca.Function] = {}
         nx = len(plant.states)

@@ -156,26 +156,10 @@ def _ros2_step(plant: Plant, h: float, substeps: int) -> ca.Function:
 
 
 def _hidden_rest(plant: Plant, z, u_prev, p):
-    """State with the unmeasured states at their quiescent values (expressions)."""
-    names = plant.state_names
-    pv = {n: p[i] for i, n in enumerate(plant.param_names)}
-    out = []
-    for i, n in enumerate(names):
-        if n == "spool":
-            out.append(u_prev)
-        elif n in ("spool_rate",) or (n.startswith("line_") and "_q" in n):
-            out.append(0.0)
-        elif n in ("T_a", "T_b"):
-            out.append(pv["gas.temperature"])
-        elif n.startswith("line_a_p"):
-            out.append(z[names.index("p_a")])
-        elif n.startswith("line_b_p"):
-            out.append(z[names.index("p_b")])
-        elif n == "p_s":
-            out.append(pv["supply.pressure"])
-        else:
-            out.append(z[i])
-    return ca.vertcat(*out)
+    """State with the unmeasured states (those effects add) at their quiescent values
+    given the basic ones in ``z`` and the command ``u_prev`` (expressions);
+    :meth:`workbench.plant.Plant.rest_state`."""
+    return plant.rest_state(z, u_prev, p)
 
 
 class Engine:

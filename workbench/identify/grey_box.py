@@ -598,46 +598,17 @@ def _prepare(plant: Plant, recordings: Sequence[Any], signals: Sequence[str],
 
 
 def _typical_signal(plant: Plant, s: str) -> float:
-    return {"x": plant.stroke, "v": 1.0}.get(s, 1e5)
-
-
-def _state_scale(plant: Plant, name: str) -> float:
-    if name == "x":
-        return plant.stroke
-    if name in ("p_a", "p_b", "p_s") or "_p" in name:
-        return 1e5
-    if name in ("T_a", "T_b"):
-        return 300.0
-    if "_q" in name:
-        return 1e-3
-    if name == "spool":
-        return float(plant.params["valve.command_span"])
-    if name == "spool_rate":
-        return 1e3 * float(plant.params["valve.command_span"])
-    return 1.0
+    return plant.signal(s).scale
 
 
 def _state_bounds(plant: Plant) -> tuple[np.ndarray, np.ndarray]:
     prm = plant.params
     p_hi = 3.0 * max(prm["supply.pressure"], prm["gas.atmospheric_pressure"])
     p_lo = 0.05 * prm["gas.atmospheric_pressure"]
-    lo, hi = [], []
-    for n in plant.state_names:
-        if n == "x":
-            lo.append(-0.05 * plant.stroke)
-            hi.append(1.05 * plant.stroke)
-        elif n == "v":
-            lo.append(-50.0)
-            hi.append(50.0)
-        elif n in ("p_a", "p_b", "p_s") or "_p" in n:
-            lo.append(p_lo)
-            hi.append(p_hi)
-        elif n in ("T_a", "T_b"):
-            lo.append(100.0)
-            hi.append(1000.0)
-        else:
-            lo.append(-math.inf)
-            hi.append(math.inf)
+    bounds = {"position": (-0.05 * plant.stroke, 1.05 * plant.stroke),
+              "velocity": (-50.0, 50.0), "pressure": (p_lo, p_hi),
+              "temperature": (100.0, 1000.0)}
+    lo, hi = zip(*(bounds.get(s.kind, (-math.inf, math.inf)) for s in plant.states))
     return np.array(lo), np.array(hi)
 
 
@@ -900,7 +871,7 @@ class _Problem:
         self.nc = nx + nsel
         self.ny = ny = len(sig_names)
         self.npf = len(model.p0)
-        self.sc = np.array([_state_scale(model, n) for n in model.state_names])
+        self.sc = model.state_scales()
         out_idx = [model.output_index(s) for s in sig_names]
         first = 0
         for d in data:

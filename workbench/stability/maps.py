@@ -205,7 +205,7 @@ class _Sweeper:
 
     def __init__(self, params_dict: dict, friction: str, position: float, controller: dict,
                  delay_samples: int, compile_c: bool) -> None:
-        from ..linearize import PIN_UNDERLAP, _scale_of, operating_point
+        from ..equilibrium import PIN_UNDERLAP, RATE_PER_SCALE, operating_point
         from ..params import PlantParams
         self.spec = (params_dict, friction, position, controller, delay_samples, compile_c)
         prm = PlantParams.from_dict(params_dict)
@@ -218,11 +218,11 @@ class _Sweeper:
         n = len(names)
         self.n = n
         self.names = names
-        free = [i for i in range(n) if names[i] not in ("x", "v")]
-        eqs = [i for i in range(n) if names[i] != "x"]
-        xs = np.array([_scale_of(names[i]) for i in free])
-        fs = np.array([_scale_of(names[i]) * 100.0 for i in eqs])
-        self.state_scale = np.array([_scale_of(nm) for nm in names])
+        ix, iv = model.states_of_kind("position") + model.states_of_kind("velocity")
+        free = [i for i in range(n) if i not in (ix, iv)]
+        eqs = [i for i in range(n) if i != ix]
+        self.state_scale = model.state_scales()
+        xs, fs = self.state_scale[free], self.state_scale[eqs] * RATE_PER_SCALE
         center = prm["valve.command_center"] + prm.get("valve.null_offset", 0.0)
         span = prm["valve.command_span"]
         self.u_scale = span
@@ -263,9 +263,9 @@ class _Sweeper:
         ips, ipa = pnames.index("supply.pressure"), pnames.index("gas.atmospheric_pressure")
         ps_nom = self.p0[ips]
         guess = []
+        pressures = set(model.states_of_kind("pressure"))
         for j, i in enumerate(free):
-            nm = names[i]
-            if nm in ("p_a", "p_b", "p_s") or nm.startswith(("line_a_p", "line_b_p")):
+            if i in pressures:
                 guess.append((p[ipa] + (znom[j] * xs[j] - p[ipa]) * p[ips] / ps_nom) / xs[j])
             else:
                 guess.append(ca.SX(znom[j]))
@@ -307,7 +307,7 @@ class _Sweeper:
         bad = ~(np.isfinite(res) & (res < _RESIDUAL_TOL) & np.all(np.isfinite(st), axis=1))
         fallbacks = int(bad.sum())
         if fallbacks:
-            from ..linearize import operating_point
+            from ..equilibrium import operating_point
             for k in np.flatnonzero(bad):
                 try:
                     op = operating_point(self.model, float(positions[k]), p=P[:, k])
