@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import casadi as ca
@@ -10,7 +11,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from workbench import Plant, controllers, simulate
+from workbench.bench.compiled_loop import CompiledLoop
 from workbench.errors import InputError
+from workbench.integrate import step_function
 
 PLANTS = Path(__file__).resolve().parents[1] / "designs" / "plants"
 
@@ -132,7 +135,7 @@ def test_compiled_loop_matches_cvodes_loop(rig25):
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.1, 0.4], hold=0.6)
     tight = simulate.closed_loop(rig25, ctrl, ref, x0=0.25, rtol=1e-10, atol=1e-12)
-    comp = simulate.CompiledLoop(rig25, ctrl, jit=False).run(ref, 1.2, 0.25)
+    comp = CompiledLoop(rig25, ctrl, jit=False).run(ref, 1.2, 0.25)
     assert comp.time.shape == tight.time.shape
     assert np.allclose(comp.time, tight.time)
     assert np.max(np.abs(comp["x"] - tight["x"])) < 1e-4
@@ -149,7 +152,7 @@ def test_compiled_loop_other_methods(rig25, method, substeps, bound):
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.1, 0.4], hold=0.3)
     tight = simulate.closed_loop(rig25, ctrl, ref, x0=0.25, rtol=1e-10, atol=1e-12)
-    comp = simulate.CompiledLoop(rig25, ctrl, substeps=substeps, method=method).run(ref, 0.6, 0.25)
+    comp = CompiledLoop(rig25, ctrl, substeps=substeps, method=method).run(ref, 0.6, 0.25)
     assert comp.info["method"] == f"{method}-compiled"
     assert np.max(np.abs(comp["x"] - tight["x"])) < bound
 
@@ -157,7 +160,7 @@ def test_compiled_loop_other_methods(rig25, method, substeps, bound):
 def test_compiled_loop_every_substep(rig25):
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.3], hold=0.1)
-    loop = simulate.CompiledLoop(rig25, ctrl, substeps=4)
+    loop = CompiledLoop(rig25, ctrl, substeps=4)
     coarse = loop.run(ref, 0.1, 0.25)
     fine = loop.run(ref, 0.1, 0.25, every_substep=True)
     assert fine.time.shape == (41,) and np.allclose(np.diff(fine.time), 0.0025)
@@ -180,10 +183,10 @@ def test_compiled_step_orders():
             x, aux = (np.asarray(v).ravel() for v in step(x, 1.0, aux))
         return x
 
-    ref = integrate(simulate._rodas4_step, 1e-3 / 4)
-    for name, builder, kw, order in (("ros4", simulate._ros4_step, {}, 4),
-                                     ("rodas4", simulate._rodas4_step, {}, 4),
-                                     ("radau", simulate._radau_step, {"newton_iterations": 8}, 5)):
+    ref = integrate(partial(step_function, "rodas4"), 1e-3 / 4)
+    for name, builder, kw, order in (("ros4", partial(step_function, "ros4"), {}, 4),
+                                     ("rodas4", partial(step_function, "rodas4"), {}, 4),
+                                     ("radau", partial(step_function, "radau"), {"newton_iterations": 8}, 5)):
         e1, e2 = (np.max(np.abs(integrate(builder, h, **kw) - ref)) for h in (0.05, 0.025))
         assert np.log2(e1 / e2) == pytest.approx(order, abs=0.3), name
 
@@ -197,9 +200,9 @@ def test_compiled_loop_native_matches_vm(rig25):
         pytest.skip("no C compiler")
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.1, 0.4], hold=0.3)
-    native = simulate.CompiledLoop(rig25, ctrl, jit=True)
+    native = CompiledLoop(rig25, ctrl, jit=True)
     assert native.compile(), native.native_error
-    vm = simulate.CompiledLoop(rig25, ctrl, jit=False)
+    vm = CompiledLoop(rig25, ctrl, jit=False)
     a, b = native.run(ref, 0.6, 0.25), vm.run(ref, 0.6, 0.25)
     assert a.info["native"] and not b.info["native"]
     assert np.allclose(a.states, b.states, rtol=1e-12, atol=1e-12)
@@ -213,8 +216,8 @@ def test_compiled_loop_native_matches_vm(rig25):
 def test_compiled_loop_bad_input(rig25):
     ctrl = controllers.from_plant(rig25)
     with pytest.raises(InputError, match="method"):
-        simulate.CompiledLoop(rig25, ctrl, method="euler")
+        CompiledLoop(rig25, ctrl, method="euler")
     with pytest.raises(InputError, match="substeps"):
-        simulate.CompiledLoop(rig25, ctrl, substeps=0)
+        CompiledLoop(rig25, ctrl, substeps=0)
     with pytest.raises(InputError, match="controller"):
-        simulate.CompiledLoop(rig25, object())
+        CompiledLoop(rig25, object())
