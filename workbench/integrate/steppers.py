@@ -22,6 +22,7 @@ Function level:
 
 from __future__ import annotations
 
+import functools
 from typing import Callable
 
 import casadi as ca
@@ -52,34 +53,50 @@ def explicit_rk(tableau: ButcherTableau, f: Callable, x, h):
             if tableau.a[i][j]:
                 arg = arg + (h * tableau.a[i][j]) * k[j]
         k.append(f(arg))
+    den = _common_denominator(tableau.b)
+    if den:        # x + h/D sum_i n_i k_i with integers n_i (RK4: h/6 (k1 + 2 k2 + 2 k3 + k4))
+        terms = [ki if n == 1 else n * ki
+                 for n, ki in zip((round(bi * den) for bi in tableau.b), k) if n]
+        return x + h / den * functools.reduce(lambda a, b: a + b, terms)
     return x + h * sum(bi * ki for bi, ki in zip(tableau.b, k) if bi)
+
+
+def _common_denominator(b, largest: int = 24) -> int | None:
+    """The least D <= ``largest`` making every D b_i an integer (1e-12), else None."""
+    for den in range(1, largest + 1):
+        if all(abs(bi * den - round(bi * den)) < 1e-12 for bi in b):
+            return den
+    return None
 
 
 def rosenbrock(tableau: RosenbrockTableau, f: Callable, x, h: float, fx=None, jacobian=None,
                solve: Callable | None = None):
-    """One Rosenbrock step x -> x+ (Hairer & Wanner form, see :class:`RosenbrockTableau`).
+    """One Rosenbrock step x -> x+ (see :class:`RosenbrockTableau` for both forms).
 
     Parameters
     ----------
     f : right-hand side, x -> dx/dt.
     x : state expression (SX for the default solver). h : step, s.
     fx : f(x) when the caller has it already (avoids a second copy).
-    jacobian : the matrix J (or an approximation W) of the step; default df/dx at x.
-    solve : ``solve(M, rhs)`` for M = I/(h gamma) - J; default the unpivoted LU of
-        :mod:`.linalg` written out in SX (factorised once per step).
+    jacobian : the matrix J (or an approximation W of it) of the step; default df/dx at x.
+    solve : ``solve(M, rhs)`` with M = I/(h gamma) - J (form "hw") or I - gamma h J
+        (form "w"); default the unpivoted LU of :mod:`.linalg` of I/(h gamma) - J,
+        written out in SX and factorised once per step.
 
     A stage whose argument equals the previous one reuses its f (ROS4's stages 3, 4).
     """
     fx = f(x) if fx is None else fx
     J = ca.jacobian(fx, x) if jacobian is None else jacobian
-    shift = 1.0 / (tableau.gamma * h)
+    gh = tableau.gamma * h
+    w_form = tableau.form == "w"
     if solve is None:
-        lu = linalg.lu_factor(linalg.shifted(J, shift))
+        lu = linalg.lu_factor(linalg.shifted(J, 1.0 / gh))
 
         def lin(b):
-            return linalg.lu_solve(lu, b)
+            return linalg.lu_solve(lu, b / gh if w_form else b)
     else:
-        M = type(J).eye(J.shape[0]) * shift - J
+        eye = type(J).eye(J.shape[0])
+        M = eye - gh * J if w_form else eye * (1.0 / gh) - J
 
         def lin(b):
             return solve(M, b)
@@ -90,10 +107,16 @@ def rosenbrock(tableau: RosenbrockTableau, f: Callable, x, h: float, fx=None, ja
         while a and not a[-1]:
             a = a[:-1]
         if i and a != prev:
-            fi = f(x + sum(aj * kj for aj, kj in zip(a, k) if aj))
+            fi = f(x + sum((h * aj if w_form else aj) * kj for aj, kj in zip(a, k) if aj))
         prev = a
-        rhs = fi + sum((cj / h) * kj for cj, kj in zip(c, k) if cj)
+        rhs = fi + sum((cj if w_form else cj / h) * kj for cj, kj in zip(c, k) if cj)
         k.append(lin(rhs))
+    if w_form:
+        x_next = x
+        for mi, ki in zip(tableau.m, k):
+            if mi:
+                x_next = x_next + mi * h * ki
+        return x_next
     return x + sum(mi * ki for mi, ki in zip(tableau.m, k) if mi)
 
 

@@ -95,16 +95,23 @@ RADAU_IIA: dict[int, ButcherTableau] = {1: RADAU_IIA_1, 2: RADAU_IIA_2, 3: RADAU
 
 @dataclass(frozen=True)
 class RosenbrockTableau:
-    """A Rosenbrock method in the form of Hairer & Wanner (Solving ODEs II, sec. IV.7).
+    """A Rosenbrock method, with J = f'(x) (or an approximation of it).
 
-    (1/(h gamma) I - J) k_i = f(x + sum_j a_ij k_j) + sum_j c_ij / h k_j,
-    x+ = x + sum_i m_i k_i, with J = f'(x) (or an approximation W of it).
+    Two normalisations of the coefficients are in use in the literature:
+
+    * ``form="hw"``, Hairer & Wanner (Solving ODEs II, sec. IV.7):
+      (1/(h gamma) I - J) k_i = f(x + sum_j a_ij k_j) + sum_j c_ij / h k_j,
+      x+ = x + sum_i m_i k_i;
+    * ``form="w"``, Verwer et al. (1999):
+      (I - gamma h J) k_i = f(x + h sum_j a_ij k_j) + sum_j c_ij k_j,
+      x+ = x + h sum_i m_i k_i.
 
     Attributes
     ----------
     name : str
     gamma : diagonal coefficient. a, c : strictly lower rows (row i has i entries).
     m : weights of the stages. order : classical order. stability : in words.
+    form : ``"hw"`` or ``"w"``, the normalisation above.
     """
 
     name: str
@@ -114,19 +121,23 @@ class RosenbrockTableau:
     m: tuple[float, ...]
     order: int
     stability: str
+    form: str = "hw"
+
+    def __post_init__(self) -> None:
+        if self.form not in ("hw", "w"):
+            raise ValueError(f"form must be 'hw' or 'w', got {self.form!r}")
 
     @property
     def stages(self) -> int:
         return len(self.m)
 
 
-_G2 = 1.0 + 1.0 / math.sqrt(2.0)
-#: ROS2 (Verwer et al. 1999), 2 stages, order 2, L-stable; keeps order 2 for any
-#: approximation W of the Jacobian. In Verwer's form with W = I - gamma h J:
+#: ROS2 (Verwer et al. 1999), 2 stages, order 2, L-stable, gamma = 1 + 1/sqrt(2); keeps
+#: order 2 for any approximation W of the Jacobian. Verwer's form: with W = I - gamma h J,
 #: W k1 = f(x), W k2 = f(x + h k1) - 2 k1, x+ = x + h (1.5 k1 + 0.5 k2).
-ROS2 = RosenbrockTableau(name="ros2", gamma=_G2, a=((), (1.0 / _G2,)), c=((), (-2.0 / _G2,)),
-                         m=(1.5 / _G2, 0.5 / _G2), order=2,
-                         stability="L-stable, order 2 for any Jacobian approximation")
+ROS2 = RosenbrockTableau(name="ros2", gamma=1.0 + 1.0 / math.sqrt(2.0), a=((), (1.0,)),
+                         c=((), (-2.0,)), m=(1.5, 0.5), order=2,
+                         stability="L-stable, order 2 for any Jacobian approximation", form="w")
 
 #: ROS4: the 4-stage method of order 4 of Hairer & Wanner (Solving ODEs II, sec. IV.7;
 #: the L-stable choice of ros4.f); stages 3 and 4 share one f.
