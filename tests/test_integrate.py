@@ -131,7 +131,8 @@ def test_radau_sensitivity_matches_central_differences():
     # equations) against central differences of the step itself. Step 1e-6 (relative):
     # truncation O(1e-12) and rounding O(1e-16 / 1e-6 = 1e-10) both below the 1e-7 bound.
     x, u, p = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("p", 2)
-    f = ca.Function("f", [x, u, p], [ca.vertcat(x[1], -p[0] * ca.sin(x[0]) - p[1] * x[1] ** 3 + u)])
+    f = ca.Function("f", [x, u, p],
+                    [ca.vertcat(x[1], -p[0] * ca.sin(x[0]) - p[1] * x[1] ** 3 + u)])
     E = np.array([[1.0, 0.0], [0.0, 1.0]])
     for tab in (integrate.RADAU_IIA_2, integrate.RADAU_IIA_3):
         step, sens = integrate.radau_step_functions(tab, f, 2, newton=12)

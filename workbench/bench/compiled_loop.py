@@ -233,7 +233,7 @@ class _NativeUnavailable(Exception):
 _DRIVER_C = r"""
 #include <stdlib.h>
 
-/* workbench.bench.compiled_loop.CompiledLoop: n control periods, each wb_ctrl then WB_M x wb_step */
+/* workbench.bench.compiled_loop: n control periods, each wb_ctrl then WB_M x wb_step */
 #define WB_NX %(nx)d
 #define WB_NC %(nc)d
 #define WB_NZ %(nz)d
