@@ -16,9 +16,9 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from ..controllers.pd import clip_and_quantise, pid_law
+from ..controllers.pd import PID, clip_and_quantise, pid_law
 from ..errors import InputError, WorkbenchError
-from ..integrate import jit
+from ..integrate import jit as jit_cache
 from ..integrate.steppers import METHODS, step_function
 from ..plant import Plant
 from ..simulate import Trajectory, _initial, _outputs, _units
@@ -73,7 +73,6 @@ class CompiledLoop:
                  position_resolution: float | None = None,
                  command_resolution: float | None = None,
                  newton_iterations: int = 3) -> None:
-        from ..controllers.pd import PID
         if method not in METHODS:
             raise InputError(f"method must be one of {', '.join(map(repr, METHODS))}, "
                              f"got {method!r}")
@@ -357,8 +356,8 @@ class _NativeLoop:
         nx, nz, ny = kernel.size1_in(0), kernel.size1_in(2), out.size1_out(0)
         src = cg.dump() + _DRIVER_C % {"nx": nx, "nc": _NC, "nz": nz, "ny": ny, "m": substeps}
         try:
-            so, cached = jit.shared_library("wb_loop", src, (_CFLAGS, _CFLAGS_FALLBACK))
-        except jit.CompileError as exc:
+            so, cached = jit_cache.shared_library("wb_loop", src, (_CFLAGS, _CFLAGS_FALLBACK))
+        except jit_cache.CompileError as exc:
             raise _NativeUnavailable(str(exc)) from None
         try:
             return cls(str(so), nx, ny, substeps, cached)
