@@ -213,6 +213,24 @@ class Simulator:
                                  f"u = {u:g} V: {str(exc).splitlines()[0]}") from None
         return (np.asarray(res["xf"]).T) * self.scale
 
+    def hold(self, state: np.ndarray, u: float, dts: Sequence[float]) -> np.ndarray:
+        """States after each of the intervals ``dts`` (s, equal up to rounding) with
+        ``u`` (V) held, (len(dts), nx).
+
+        CVODES runs over blocks of a power of two intervals (13 intervals: 8, 4, 1;
+        a block of b intervals lasts b times its first one), which keeps the number
+        of distinct output grids (one integrator each) small.
+        """
+        n = len(dts)
+        out = np.empty((n, len(state)))
+        done = 0
+        while done < n:
+            b = 1 << ((n - done).bit_length() - 1)
+            out[done:done + b] = self.step(state, u, b * float(dts[done]), b)
+            state = out[done + b - 1]
+            done += b
+        return out
+
     def outputs(self, states: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Outputs for rows of states and commands."""
         return _outputs(self.plant, self.params, states, u)

@@ -1190,15 +1190,9 @@ def _replay(plant: Plant, t: np.ndarray, u: np.ndarray, x0: np.ndarray,
         while (j < n - 1 and u[j] == u[k] and abs(dt[j] - dt[k]) <= 1e-9 * dt[k]
                and j - k < 64 and (anchors is None or j % every)):
             j += 1
-        m = j - k
-        # powers of two keep the number of distinct CVODES grids small
-        while m > 0:
-            b = 1 << (m.bit_length() - 1)
-            block = sim.step(state, float(u[k]), b * float(dt[k]), b)
-            states[k + 1:k + 1 + b] = block
-            state = block[-1]
-            k += b
-            m -= b
+        states[k + 1:j + 1] = sim.hold(state, float(u[k]), dt[k:j])
+        state = states[j]
+        k = j
     outs = sim.outputs(states, u)
     return simulate.Trajectory(time=np.asarray(t, dtype=float), states=states,
                                inputs=np.asarray(u, dtype=float).reshape(-1, 1), outputs=outs,
