@@ -194,7 +194,7 @@ def test_compiled_step_orders():
 def test_compiled_loop_native_matches_vm(rig25):
     # The C driver runs the same kernels as the virtual machine: the same numbers up
     # to rounding (the C is built with x/c as x*(1/c)). The build (a few seconds
-    # with gcc) is cached in the temp directory.
+    # with gcc) is kept in the JIT cache (workbench.integrate.jit).
     import shutil
     if not (shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")):
         pytest.skip("no C compiler")
