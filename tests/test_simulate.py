@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import casadi as ca
@@ -10,7 +11,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from workbench import Plant, controllers, simulate
+from workbench.bench.compiled_loop import CompiledLoop
 from workbench.errors import InputError
+from workbench.integrate import step_function
 
 PLANTS = Path(__file__).resolve().parents[1] / "designs" / "plants"
 
@@ -132,7 +135,7 @@ def test_compiled_loop_matches_cvodes_loop(rig25):
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.1, 0.4], hold=0.6)
     tight = simulate.closed_loop(rig25, ctrl, ref, x0=0.25, rtol=1e-10, atol=1e-12)
-    comp = simulate.CompiledLoop(rig25, ctrl, jit=False).run(ref, 1.2, 0.25)
+    comp = CompiledLoop(rig25, ctrl, jit=False).run(ref, 1.2, 0.25)
     assert comp.time.shape == tight.time.shape
     assert np.allclose(comp.time, tight.time)
     assert np.max(np.abs(comp["x"] - tight["x"])) < 1e-4
@@ -149,7 +152,7 @@ def test_compiled_loop_other_methods(rig25, method, substeps, bound):
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.1, 0.4], hold=0.3)
     tight = simulate.closed_loop(rig25, ctrl, ref, x0=0.25, rtol=1e-10, atol=1e-12)
-    comp = simulate.CompiledLoop(rig25, ctrl, substeps=substeps, method=method).run(ref, 0.6, 0.25)
+    comp = CompiledLoop(rig25, ctrl, substeps=substeps, method=method).run(ref, 0.6, 0.25)
     assert comp.info["method"] == f"{method}-compiled"
     assert np.max(np.abs(comp["x"] - tight["x"])) < bound
 
@@ -157,7 +160,7 @@ def test_compiled_loop_other_methods(rig25, method, substeps, bound):
 def test_compiled_loop_every_substep(rig25):
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.3], hold=0.1)
-    loop = simulate.CompiledLoop(rig25, ctrl, substeps=4)
+    loop = CompiledLoop(rig25, ctrl, substeps=4)
     coarse = loop.run(ref, 0.1, 0.25)
     fine = loop.run(ref, 0.1, 0.25, every_substep=True)
     assert fine.time.shape == (41,) and np.allclose(np.diff(fine.time), 0.0025)
@@ -180,10 +183,10 @@ def test_compiled_step_orders():
             x, aux = (np.asarray(v).ravel() for v in step(x, 1.0, aux))
         return x
 
-    ref = integrate(simulate._rodas4_step, 1e-3 / 4)
-    for name, builder, kw, order in (("ros4", simulate._ros4_step, {}, 4),
-                                     ("rodas4", simulate._rodas4_step, {}, 4),
-                                     ("radau", simulate._radau_step, {"newton_iterations": 8}, 5)):
+    ref = integrate(partial(step_function, "rodas4"), 1e-3 / 4)
+    for name, builder, kw, order in (("ros4", partial(step_function, "ros4"), {}, 4),
+                                     ("rodas4", partial(step_function, "rodas4"), {}, 4),
+                                     ("radau", partial(step_function, "radau"), {"newton_iterations": 8}, 5)):
         e1, e2 = (np.max(np.abs(integrate(builder, h, **kw) - ref)) for h in (0.05, 0.025))
         assert np.log2(e1 / e2) == pytest.approx(order, abs=0.3), name
 
@@ -191,15 +194,15 @@ def test_compiled_step_orders():
 def test_compiled_loop_native_matches_vm(rig25):
     # The C driver runs the same kernels as the virtual machine: the same numbers up
     # to rounding (the C is built with x/c as x*(1/c)). The build (a few seconds
-    # with gcc) is cached in the temp directory.
+    # with gcc) is kept in the JIT cache (workbench.integrate.jit).
     import shutil
     if not (shutil.which("gcc") or shutil.which("cc") or shutil.which("clang")):
         pytest.skip("no C compiler")
     ctrl = controllers.from_plant(rig25)
     ref = simulate.steps([0.1, 0.4], hold=0.3)
-    native = simulate.CompiledLoop(rig25, ctrl, jit=True)
+    native = CompiledLoop(rig25, ctrl, jit=True)
     assert native.compile(), native.native_error
-    vm = simulate.CompiledLoop(rig25, ctrl, jit=False)
+    vm = CompiledLoop(rig25, ctrl, jit=False)
     a, b = native.run(ref, 0.6, 0.25), vm.run(ref, 0.6, 0.25)
     assert a.info["native"] and not b.info["native"]
     assert np.allclose(a.states, b.states, rtol=1e-12, atol=1e-12)
@@ -213,8 +216,33 @@ def test_compiled_loop_native_matches_vm(rig25):
 def test_compiled_loop_bad_input(rig25):
     ctrl = controllers.from_plant(rig25)
     with pytest.raises(InputError, match="method"):
-        simulate.CompiledLoop(rig25, ctrl, method="euler")
+        CompiledLoop(rig25, ctrl, method="euler")
     with pytest.raises(InputError, match="substeps"):
-        simulate.CompiledLoop(rig25, ctrl, substeps=0)
+        CompiledLoop(rig25, ctrl, substeps=0)
     with pytest.raises(InputError, match="controller"):
-        simulate.CompiledLoop(rig25, object())
+        CompiledLoop(rig25, object())
+
+
+def test_pid_law_float_and_sx_agree():
+    # controllers.pd.pid_law is the one PID law: on floats (PID.update, the CVODES loop)
+    # and on SX (the compiled loop, the diagnosis engine) it gives the same commands,
+    # including the held integral while saturated. Hand check of the first samples:
+    # e = 0.1 m, kp 20, ki 50, T 0.01: u = 5 + 2 + 50 * 0.001 = 7.05 V; then a large
+    # error saturates (u >= 10 V) and the integral is held at 0.001 m s.
+    from workbench.controllers.pd import PID, pid_law
+    c = PID(kp=20.0, sample_time=0.01, kd=0.3, ki=50.0, u_center=5.0, u_min=0.0, u_max=10.0)
+    st, u = c.update(c.reset(), 0.1, {"x": 0.0})
+    assert u == pytest.approx(7.05, abs=1e-12)
+    st, u = c.update(st, 1.0, {"x": 0.0})
+    assert st[1] == pytest.approx(0.001, abs=1e-15)
+    e, ep, integ = ca.SX.sym("e"), ca.SX.sym("ep"), ca.SX.sym("i")
+    law = ca.Function("law", [e, ep, integ],
+                      list(pid_law(e, ep, integ, c.kp, c.kd, c.ki, c.sample_time, c.u_center,
+                                   c.u_min, c.u_max)))
+    rng = np.random.default_rng(0)
+    state = c.reset()
+    for ek in rng.normal(0.0, 0.2, 200):
+        e_prev = ek if state[0] is None else state[0]
+        u_sx, i_sx = (float(v) for v in law(ek, e_prev, state[1]))
+        state, u_f = c.update(state, ek, {"x": 0.0})
+        assert u_f == u_sx and state[1] == i_sx

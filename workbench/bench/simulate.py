@@ -117,7 +117,7 @@ BENCH_SUBSTEPS = 14
 def bench(quick: bool = False) -> dict:
     """Closed loop, 25 mm reference plant (4 states), PD at 10 ms, 24 s of steps.
 
-    Methods: the compiled loop (``simulate.CompiledLoop``: ROS4, 14 substeps per
+    Methods: the compiled loop (:class:`.compiled_loop.CompiledLoop`: ROS4, 14 substeps per
     period, run by a C driver when a compiler is present), the default CVODES path
     (``simulate.closed_loop``) and, as the baseline, scipy ``solve_ivp`` LSODA per
     period. Accuracy is the largest position difference, at the control instants,
@@ -132,6 +132,7 @@ def bench(quick: bool = False) -> dict:
 
     from .. import controllers, simulate
     from ..plant import Plant
+    from .compiled_loop import CompiledLoop
     plant_file = ROOT / "designs" / "plants" / "rig25_mpye.toml"
     plant = Plant.from_toml(plant_file)
     ctrl = controllers.from_plant(plant)
@@ -147,7 +148,7 @@ def bench(quick: bool = False) -> dict:
     t_cv = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    loop = simulate.CompiledLoop(plant, ctrl, substeps=BENCH_SUBSTEPS, jit=True, method="ros4")
+    loop = CompiledLoop(plant, ctrl, substeps=BENCH_SUBSTEPS, jit=True, method="ros4")
     native = loop.compile()
     t_build = time.perf_counter() - t0          # symbolic build + C generation + gcc
     loop.run(ref, duration, x0)                        # warm up (first call, page faults)

@@ -24,7 +24,7 @@ Three solution modes share that problem:
     slacks): a dense, strictly convex QP of about 20 variables and 160 rows, solved
     by DAQP, a dual active-set solver made for embedded MPC. Linearisation and
     condensing, and the update of the plan from the QP step, are CasADi functions
-    compiled to C through :func:`workbench._jit.compiled`; with the QP between them
+    compiled to C through :func:`workbench.integrate.jit.compiled`; with the QP between them
     they form one CasADi function, so a sample costs one call from Python.
 ``"sqp"``
     The same Gauss-Newton steps repeated until the command step is below
@@ -79,6 +79,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
+from ..integrate import RK4, explicit_rk
 
 __all__ = ["NMPC", "NMPCState", "StepInfo", "Solution", "Recorder", "DoMPC", "prediction_model",
            "horizon_reference"]
@@ -471,11 +472,7 @@ class _Problem:
         h = T / c.substeps
         zz = z
         for _ in range(c.substeps):
-            k1 = fc(zz, w, d)
-            k2 = fc(zz + h / 2 * k1, w, d)
-            k3 = fc(zz + h / 2 * k2, w, d)
-            k4 = fc(zz + h * k3, w, d)
-            zz = zz + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            zz = explicit_rk(RK4, lambda zi: fc(zi, w, d), zz, h)
         self.F = ca.Function("wb_nmpc_F", [z, w, d], [zz])
         if c.sensitivities == "exact":
             jac = [ca.jacobian(zz, z), ca.jacobian(zz, w)]
@@ -492,7 +489,7 @@ class _Problem:
         self.d_max = 0.5 * (p_sup - p_atm) * m.area_a   # N, estimate bound (anti wind-up)
         prep, post = self._build_prep(), self._build_post()
         if c.jit:
-            from .._jit import compiled
+            from ..integrate.jit import compiled
             prep, post = compiled(prep), compiled(post)
         self.qp = self._conic(N + self.ns, 2 * N * len(self.soft))
         self.step = self._build_step(prep, post)

@@ -5,10 +5,56 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import casadi as ca
+import numpy as np
+
 from ..errors import InputError, positive
 
-__all__ = ["PID", "from_plant", "slow_time_constant", "pd_zero_on_slow_pole",
-           "pd_zero_on_slow_pole_at"]
+__all__ = ["PID", "pid_law", "clip_and_quantise", "from_plant", "slow_time_constant",
+           "pd_zero_on_slow_pole", "pd_zero_on_slow_pole_at"]
+
+
+def pid_law(e, e_prev, integral, kp: float, kd: float, ki: float, sample_time: float,
+            u_center: float, u_min: float, u_max: float):
+    """The discrete PID update, on floats or CasADi SX/MX alike: (u, integral next).
+
+    u = u_center + kp e + kd (e - e_prev) / T + ki I with I = integral + e T, except
+    that while the command with the new integral is saturated (u <= u_min or
+    u >= u_max) the integral is held (conditional integration). The command is not
+    clipped here (see :func:`clip_and_quantise`).
+
+    Parameters
+    ----------
+    e : position error r - x at this sample, m. e_prev : error at the previous sample,
+        m (the first sample takes e_prev = e: no derivative kick).
+    integral : sum of e T so far, m s.
+    kp : V/m. kd : V s/m. ki : V/(m s). sample_time : T, s.
+    u_center : command at zero error, V. u_min, u_max : command range, V.
+
+    Returns
+    -------
+    (u, integral_next) : command, V, and the integral to carry, m s.
+    """
+    T = sample_time
+    u_free = u_center + kp * e + kd * (e - e_prev) / T
+    integ = integral + e * T
+    if ki:
+        u_try = u_free + ki * integ
+        if isinstance(u_try, (int, float, np.floating)):
+            if not u_min < u_try < u_max:
+                integ = integral            # hold the integral while saturated
+        else:
+            integ = ca.if_else(ca.logic_or(u_try <= u_min, u_try >= u_max), integral, integ)
+    return u_free + ki * integ, integ
+
+
+def clip_and_quantise(u, lo: float, hi: float, resolution: float | None = None):
+    """Command clipped to [lo, hi] V, then rounded to the DAC step ``resolution`` (V)
+    and clipped again; floats or CasADi expressions."""
+    u = ca.fmin(ca.fmax(u, lo), hi)
+    if resolution:
+        u = ca.fmin(ca.fmax(ca.floor(u / resolution + 0.5) * resolution, lo), hi)
+    return u
 
 
 @dataclass(frozen=True)
@@ -53,13 +99,8 @@ class PID:
         e = r - y["x"]
         if e_prev is None:
             e_prev = e
-        T = self.sample_time
-        u_free = self.u_center + self.kp * e + self.kd * (e - e_prev) / T
-        new_integ = integ + e * T
-        u = u_free + self.ki * new_integ
-        if self.ki and not (self.u_min < u < self.u_max):
-            new_integ = integ           # hold the integral while saturated
-            u = u_free + self.ki * integ
+        u, new_integ = pid_law(e, e_prev, integ, self.kp, self.kd, self.ki, self.sample_time,
+                               self.u_center, self.u_min, self.u_max)
         return (e, new_integ), u
 
     def to_control(self):

@@ -17,13 +17,14 @@ samples that can be **re-anchored** on the measurement wherever asked:
   from which the equation errors of :mod:`.witness` are formed.
 
 Integration: the 2-stage Rosenbrock method ROS2 (Verwer et al. 1999), L-stable,
-one step per recorded sample (or ``substeps``). ROS2 keeps its order 2 for any
+one step per recorded sample (or ``substeps``), by :func:`workbench.integrate.rosenbrock`
+with :data:`workbench.integrate.ROS2`. ROS2 keeps its order 2 for any
 approximation W of the Jacobian, which is used here: positive diagonal entries of
 the Jacobian (the negative damping of a Stribeck friction curve) are left out of W
 so that a falling friction curve cannot make the linear solve singular. The
 per-sample function (reset + controller + step) is accumulated over a chunk of
 samples (``mapaccum``) and compiled to C once per plant structure and controller
-(:func:`workbench._jit.compiled`, cached by source hash); Python loops over the
+(:func:`workbench.integrate.jit.compiled`, cached by source hash); Python loops over the
 chunks. One replay of 24 s at 1 kHz of the 4-state plant takes about 0.1 s.
 """
 
@@ -36,7 +37,10 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from .. import _jit
+from ..controllers.pd import clip_and_quantise, pid_law
+from ..integrate import ROS2, rosenbrock
+from ..integrate.jit import compiled
+from ..physics.friction import stribeck_level
 from ..plant import Plant
 
 __all__ = ["Engine", "EngineInputs", "OUTPUTS", "INPUT_ROWS"]
@@ -86,7 +90,6 @@ def _ros2_step(plant: Plant, h: float, substeps: int) -> ca.Function:
     z = Sym.sym("z", nx)
     u = Sym.sym("u")
     p = Sym.sym("p", len(plant.p0))
-    g = 1.0 + 1.0 / np.sqrt(2.0)
     dt = h / substeps
     fric = plant.params.has_effect("dry_friction")
     if fric:
@@ -107,7 +110,7 @@ def _ros2_step(plant: Plant, h: float, substeps: int) -> ca.Function:
             return m * base.f(z_rest, u, pb)[iv]
 
         def rates(zz, direction):
-            level = fc + (fs - fc) * ca.exp(-(zz[iv] / vs) ** 2)
+            level = stribeck_level(zz[iv], fc, fs, vs)
             return base.f(zz, u, pb) - ev * (direction * level / m)
     zk = z                      # one step, from the symbolic state
     if fric:
@@ -125,14 +128,10 @@ def _ros2_step(plant: Plant, h: float, substeps: int) -> ca.Function:
     fz = f_of(zk)
     J = ca.jacobian(fz, zk)
     J = J - ca.diag(ca.fmax(ca.diag(J), 0.0))
-    W = Sym.eye(nx) - g * dt * J
-    if sx:
-        k1 = ca.solve(W, fz)
-        k2 = ca.solve(W, f_of(zk + dt * k1) - 2.0 * k1)
-    else:
-        k1 = ca.solve(W, fz, "qr")
-        k2 = ca.solve(W, f_of(zk + dt * k1) - 2.0 * k1, "qr")
-    zn = zk + 1.5 * dt * k1 + 0.5 * dt * k2
+
+    def solve(M, rhs):
+        return ca.solve(M, rhs) if sx else ca.solve(M, rhs, "qr")
+    zn = rosenbrock(ROS2, f_of, zk, dt, fx=fz, jacobian=J, solve=solve)
     if fric:
         v1 = zn[iv]
         den = v0 - v1
@@ -210,16 +209,9 @@ class Engine:
             if res:
                 xm = ca.floor(xm / res + 0.5) * res
             e = row["r"] - xm
-            u_free = c.u_center + c.kp * e + c.kd * (e - c_prev) / c.sample_time
-            integ = cs[1] + e * c.sample_time
-            if c.ki:
-                u_try = u_free + c.ki * integ
-                sat = ca.logic_or(u_try <= c.u_min, u_try >= c.u_max)
-                integ = ca.if_else(sat, cs[1], integ)
-            ucmd = ca.fmin(ca.fmax(u_free + c.ki * integ, lo), hi)
-            cres = prm.get("controller.command_resolution")
-            if cres:
-                ucmd = ca.fmin(ca.fmax(ca.floor(ucmd / cres + 0.5) * cres, lo), hi)
+            u_pid, integ = pid_law(e, c_prev, cs[1], c.kp, c.kd, c.ki, c.sample_time,
+                                   c.u_center, c.u_min, c.u_max)
+            ucmd = clip_and_quantise(u_pid, lo, hi, prm.get("controller.command_resolution"))
             isc = row["control_instant"]
             u_held = ca.if_else(isc, ucmd, cs[2])
             e_prev = ca.if_else(isc, e, c_prev)
@@ -251,7 +243,7 @@ class Engine:
                                   prm.get("controller.command_resolution")))).encode()
                            ).hexdigest()[:12]
         f = ca.Function(f"diag_{tag}", [Z0, C0, In, P], [zf[:, -1], cf[:, -1], Y])
-        self._fun = _jit.compiled(f, flags=("-O2",)) if jit else f
+        self._fun = compiled(f, flags=("-O2",)) if jit else f
 
     def run(self, z0: np.ndarray, inputs: EngineInputs, p: Sequence[float],
             c0: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:

@@ -27,7 +27,7 @@ Jacobian; the sensitivities of each step with respect to its start state and to 
 parameters are exact for the stage equations (implicit function theorem) and are
 propagated through the interval in the same compiled function. The step is generated
 as C and compiled once per plant structure and number of parameters
-(:mod:`workbench._jit`, cached on disk); plants with many states (line segments) use a
+(:mod:`workbench.integrate.jit`, cached on disk); plants with many states (line segments) use a
 sparse LU at run time instead. On the 25 mm reference rig at 1 kHz the 2-stage scheme
 at 1 ms stays within about 1e-6 of full scale of CVODES at a tight tolerance (the
 default tolerances of :func:`workbench.simulate.open_loop` give about 1e-5); every
@@ -113,7 +113,8 @@ from typing import Any, Callable, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from .. import _jit
+from ..integrate import RADAU_IIA, radau_sensitivity, radau_stages
+from ..integrate import jit as _jit
 from ..errors import InputError, WorkbenchError
 from ..params import EFFECTS, SCHEMA
 from ..plant import Plant
@@ -125,17 +126,10 @@ __all__ = ["estimate", "GreyBoxResult", "SIGNALS", "RADAU_TABLES", "noise_std",
 #: Recorded signals the estimator can compare with the model (plant output names).
 SIGNALS: tuple[str, ...] = ("x", "p_a", "p_b", "v", "p_s")
 
-#: Radau IIA Butcher tables (A, c), by number of stages.
-_S6 = math.sqrt(6.0)
+#: Radau IIA Butcher tables (A, c), by number of stages (from
+#: :data:`workbench.integrate.RADAU_IIA`).
 RADAU_TABLES: dict[int, tuple[np.ndarray, np.ndarray]] = {
-    1: (np.array([[1.0]]), np.array([1.0])),
-    2: (np.array([[5.0 / 12.0, -1.0 / 12.0], [3.0 / 4.0, 1.0 / 4.0]]),
-        np.array([1.0 / 3.0, 1.0])),
-    3: (np.array([[(88 - 7 * _S6) / 360, (296 - 169 * _S6) / 1800, (-2 + 3 * _S6) / 225],
-                  [(296 + 169 * _S6) / 1800, (88 + 7 * _S6) / 360, (-2 - 3 * _S6) / 225],
-                  [(16 - _S6) / 36, (16 + _S6) / 36, 1.0 / 9.0]]),
-        np.array([(4 - _S6) / 10, (4 + _S6) / 10, 1.0])),
-}
+    s: (tab.A, np.array(tab.c, dtype=float)) for s, tab in RADAU_IIA.items()}
 
 #: Above this size of the stage equations (stages x states) the step is built from
 #: matrix expressions with a sparse LU instead of compiled scalar code (line segments).
@@ -622,7 +616,7 @@ def _step_functions(model: Plant, nsel: int, out_idx: Sequence[int], stages: int
     gb_step_sens(X, S, u, h, p, E) -> (X+, S+, y, dy): S = d X / d[X_node, theta] with
     theta = E' p (E selects the estimated parameters), dy = d y / d[X_node, theta].
     """
-    A_np, c_np = RADAU_TABLES[stages]
+    tableau = RADAU_IIA[stages]
     nx, npf = len(model.states), len(model.p0)
     nc = nx + nsel
     xs, us, ps = model.x_sym, model.u_sym, model.p_sym
@@ -644,44 +638,15 @@ def _step_functions(model: Plant, nsel: int, out_idx: Sequence[int], stages: int
     h = T.sym("h")
     p = T.sym("p", npf)
     E = T.sym("E", npf, nsel)
-    A = ca.DM(A_np)
-    K = ca.kron(A, ca.DM.eye(nx))
-    hs = h
     y, hy_x, hy_p = hjac(X, u, p)
     dy = ca.mtimes(hy_x, S) + ca.horzcat(T.zeros(len(out_idx), nx), ca.mtimes(hy_p, E))
-
-    def solve(Mat, rhs):
-        return ca.solve(Mat, rhs, "csparse") if large else ca.solve(Mat, rhs)
-
-    def stage_solve(Xk):
-        f0 = fx(Xk, u, p)
-        J0, _ = fjac(Xk, u, p)
-        Mm = T.eye(stages * nx) - hs * ca.kron(A, J0)
-        Z = ca.vertcat(*[float(c_np[i]) * hs * f0 for i in range(stages)])
-        if not large:
-            Q, R = ca.qr(Mm)
-        for _ in range(newton):
-            F = ca.vertcat(*[fx(Xk + Z[i * nx:(i + 1) * nx], u, p) for i in range(stages)])
-            res = Z - hs * ca.mtimes(K, F)
-            Z = Z - (solve(Mm, res) if large else ca.solve(R, ca.mtimes(Q.T, res)))
-        return Z
-
+    # the Radau IIA step of workbench.integrate: stages by Newton, sensitivities by the
+    # implicit function theorem on the stage equations
+    Z = radau_stages(tableau, fx, fjac, X, u, h, p, newton, large)
     last = slice((stages - 1) * nx, stages * nx)
-    Z = stage_solve(X)
     primal = ca.Function("gb_step", [X, u, h, p], [X + Z[last], y], ["X", "u", "h", "p"],
                          ["Xn", "y"])
-    Js, Ps = [], []
-    for i in range(stages):
-        Ji, Pi = fjac(X + Z[i * nx:(i + 1) * nx], u, p)
-        Js.append(Ji)
-        Ps.append(ca.mtimes(Pi, E))
-    # implicit function theorem on the stage equations Z - h (A x I) F(X + Z) = 0
-    Gz = T.eye(stages * nx) - hs * ca.mtimes(K, ca.diagcat(*Js))
-    rhs = hs * ca.mtimes(K, ca.vertcat(*[ca.horzcat(Js[i], Ps[i]) for i in range(stages)]))
-    D = solve(Gz, rhs)
-    Phi = T.eye(nx) + D[last, :nx]
-    Sk = ca.mtimes(Phi, S) + ca.horzcat(T.zeros(nx, nx), D[last, nx:])
-    Xk = X + Z[last]
+    Xk, Sk = radau_sensitivity(tableau, fjac, X, Z, S, u, h, p, E, large)
     sens = ca.Function("gb_step_sens", [X, S, u, h, p, E], [Xk, Sk, y, dy],
                        ["X", "S", "u", "h", "p", "E"], ["Xn", "Sn", "y", "dy"])
     if flags is None or large:        # CasADi's virtual machine, no compiler
@@ -1196,15 +1161,9 @@ def _replay(plant: Plant, t: np.ndarray, u: np.ndarray, x0: np.ndarray,
         while (j < n - 1 and u[j] == u[k] and abs(dt[j] - dt[k]) <= 1e-9 * dt[k]
                and j - k < 64 and (anchors is None or j % every)):
             j += 1
-        m = j - k
-        # powers of two keep the number of distinct CVODES grids small
-        while m > 0:
-            b = 1 << (m.bit_length() - 1)
-            block = sim.step(state, float(u[k]), b * float(dt[k]), b)
-            states[k + 1:k + 1 + b] = block
-            state = block[-1]
-            k += b
-            m -= b
+        states[k + 1:j + 1] = sim.hold(state, float(u[k]), dt[k:j])
+        state = states[j]
+        k = j
     outs = sim.outputs(states, u)
     return simulate.Trajectory(time=np.asarray(t, dtype=float), states=states,
                                inputs=np.asarray(u, dtype=float).reshape(-1, 1), outputs=outs,
