@@ -62,7 +62,7 @@ def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
     from workbench.diagnose import diagnose
     case, plant_file, rec_file, _ = concealed(kind, seed, diag_dir)
     d = diagnose(plant_file, rec_file)
-    res = d.to_json()
+    res = d.to_dict()
     sc = synth.score(case, res)
     info = f"concealed {case.values}; got {json.dumps(res['findings'])[:400]}"
     assert sc["correct"], f"named {sc['named']} instead of {sc['expected']}: {info}"

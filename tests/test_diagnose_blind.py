@@ -103,7 +103,7 @@ def test_foreign_friction_law_is_diagnosed(tmp_path):
     rec = foreign_rig(plant_file, synth.rich_reference(21, 20.0), 20.0, seed=21,
                       coulomb=coulomb, static=static, stribeck=0.012)
     d = diagnose(plant_file, rec)
-    res = d.to_json()
+    res = d.to_dict()
     assert res["findings"], d.summary()
     f = res["findings"][0]
     assert f["effect"] == "dry_friction", d.summary()

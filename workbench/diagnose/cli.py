@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
                  mode=args.mode, verbose=verbose)
     paths = d.write(args.out, report=not args.no_report)
     if args.json:
-        print(json.dumps(d.to_json(), indent=2))
+        print(json.dumps(d.to_dict(), indent=2))
     else:
         print(d.summary())
         print("wrote " + ", ".join(str(p) for p in paths.values()))
