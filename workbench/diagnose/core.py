@@ -46,7 +46,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -57,22 +57,16 @@ from ..recording import Recording, fit
 from .candidates import Candidate, candidates as make_candidates
 from .data import Prepared, prepare
 from .evidence import confidence, evidence_text
-from .explain import Ranked, rank, refit_all
-from .locate import concentration, consistency, intervals, regimes, smooth_error
+from .explain import Chosen, Ranked, Refits, choose, promising, refit_fully, screen
+from .locate import concentration, intervals, regimes, smooth_error
 from .predict import Predictor, horizons, segments
-from .refit import CandidateModel, FitResult
+from .refit import CandidateModel
 from .witness import Witness, observer_inputs
 
 __all__ = ["Finding", "Diagnosis", "diagnose", "replay"]
 
 #: s: anchor spacing of the open-loop replay reported when there is no closed loop.
 OPEN_ANCHOR = 0.5
-#: Further findings looked for after the first.
-MAX_EXTRA = 2
-#: Least-squares iterations of the screening refit of every candidate.
-SCREEN_NFEV = 3
-#: Candidates refitted fully after the screening.
-FULL_REFITS = 4
 
 
 @dataclass(frozen=True)
@@ -316,17 +310,18 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
     clock.tick("witnesses and regimes")
     # 3. explain: every candidate screened, the most promising refitted fully
     cands = make_candidates(params, effects, prep.has_pressures)
-    refits = _Refits(prep, params, nom, workers, jit)
-    ranking = _screen(refits, cands)
+    refits = Refits(prep, params, nom.shpe, nom.seg, nom.masks, workers, jit)
+    nothing = Chosen.nothing(nom.cost, nom.seg_cost, nom.err)
+    ranking = screen(refits, cands, nothing)
     clock.tick("candidates screened")
-    top = [r for r in ranking if np.isfinite(r.dbic) and r.dbic > 0][:FULL_REFITS]
+    top = promising(ranking)
     if top:
-        ranking = _refit_fully(refits, cands, ranking, top, max_nfev)
+        ranking = refit_fully(refits, cands, ranking, top, max_nfev, nothing)
         clock.tick("best candidates refitted")
     # 4. choose findings (greedy) and polish their values
     by_name = {c.name: c for c in cands}
-    chosen = _choose(refits, by_name, ranking, max_nfev,
-                     lambda: budget_s is not None and clock.elapsed() > budget_s)
+    chosen = choose(refits, cands, ranking, max_nfev, nothing,
+                    lambda: budget_s is not None and clock.elapsed() > budget_s)
     if chosen.ranked:
         clock.tick("further findings")
     polished: dict[str, Any] = {}
@@ -450,111 +445,6 @@ def _nominal(prep: Prepared, params: PlantParams, jit: bool) -> _Nominal:
     return _Nominal(shpe=shpe, seg=seg, cost=shpe.cost(Y0), seg_cost=seg_cost, err=err,
                     wit=wit, masks=masks, witness=witness, share=concentration(err, masks),
                     located=located)
-
-
-@dataclass(frozen=True)
-class _Refits:
-    """Refits of candidates on this recording: the data, nominal plant, predictors and
-    worker processes are fixed; :meth:`rank` weighs results against a reference."""
-
-    prep: Prepared
-    params: PlantParams
-    nom: _Nominal
-    workers: int | None
-    jit: bool
-
-    def __call__(self, cands: Sequence[Candidate], max_nfev: int,
-                 base: Mapping[str, Any] | None = None,
-                 starts: Mapping[str, Mapping[str, float]] | None = None) -> list[FitResult]:
-        return refit_all(self.prep, self.params, cands, self.nom.shpe, self.nom.seg,
-                         workers=self.workers, max_nfev=max_nfev, jit=self.jit, base=base,
-                         starts=starts)
-
-    def rank(self, results: Sequence[FitResult], cost: float, seg_cost: float | None,
-             err: np.ndarray) -> list[Ranked]:
-        """Evidence of each result against a model with short-horizon cost ``cost``,
-        segment cost ``seg_cost`` and per-sample error ``err``, best first."""
-        cons = {r.name: consistency(err - r.err, self.nom.masks, r.name)
-                if r.err is not None else None for r in results}
-        return rank(results, cost, seg_cost, self.nom.shpe.n_eff, cons)
-
-
-def _screen(refits: _Refits, cands: Sequence[Candidate]) -> list[Ranked]:
-    """Every candidate: signature scan and a short refit, ranked against the nominal."""
-    results = refits(cands, SCREEN_NFEV)
-    return refits.rank(results, refits.nom.cost, refits.nom.seg_cost, refits.nom.err)
-
-
-def _refit_fully(refits: _Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked],
-                 top: Sequence[Ranked], max_nfev: int) -> list[Ranked]:
-    """The ``top`` candidates refitted fully from their screening values; a full refit
-    replaces the screening when it succeeds and costs no more. All ranked again."""
-    by = {c.name: c for c in cands}
-    again = refits([by[r.name] for r in top], max_nfev,
-                   starts={r.name: r.result.values for r in top})
-    merged = {r.name: r.result for r in ranking}
-    for r_old, r_new in zip(top, again):
-        if r_new.error is None and r_new.cost <= r_old.result.cost:
-            r_new.grid = r_old.result.grid
-            r_new.nfev += r_old.result.nfev
-            r_new.wall_s += r_old.result.wall_s
-            merged[r_new.name] = r_new
-    results = [merged[c.name] for c in cands]
-    return refits.rank(results, refits.nom.cost, refits.nom.seg_cost, refits.nom.err)
-
-
-@dataclass
-class _Chosen:
-    """The findings chosen so far (in order), the plant keys they add and the
-    short-horizon cost, segment cost and per-sample error left with them added."""
-
-    ranked: list[Ranked]
-    added: dict[str, Any]
-    cost: float
-    seg_cost: float | None
-    err: np.ndarray
-
-    def add(self, r: Ranked) -> None:
-        self.ranked.append(r)
-        self.added.update(r.result.plant_values)
-        self.cost, self.seg_cost, self.err = r.result.cost, r.result.seg_cost, r.result.err
-
-
-def _choose(refits: _Refits, by_name: Mapping[str, Candidate], ranking: Sequence[Ranked],
-            max_nfev: int, out_of_time: Callable[[], bool]) -> _Chosen:
-    """The best significant candidate, then up to :data:`MAX_EXTRA` further ones, each
-    refitted on top of those found, while they stay significant there."""
-    nom = refits.nom
-    chosen = _Chosen([], {}, nom.cost, nom.seg_cost, nom.err)
-    if not ranking or not ranking[0].significant:
-        return chosen
-    chosen.add(ranking[0])
-    for _ in range(MAX_EXTRA):
-        if out_of_time():
-            break
-        if (nom.cost - chosen.cost) / nom.cost > 0.97:
-            break                      # nothing left worth a further effect
-        others = _others(ranking, chosen)
-        if not others:
-            break
-        more = refits([by_name[r.name] for r in others], max_nfev, base=chosen.added,
-                      starts={r.name: r.result.values for r in others})
-        ranked = refits.rank(more, chosen.cost, chosen.seg_cost, chosen.err)
-        if not ranked or not ranked[0].significant:
-            break
-        chosen.add(ranked[0])
-    return chosen
-
-
-def _others(ranking: Sequence[Ranked], chosen: _Chosen) -> list[Ranked]:
-    """Up to three significant candidates that could add to ``chosen``: another effect,
-    or a nominal value that no finding has changed yet."""
-    used = {c.result.effect for c in chosen.ranked if c.result.effect != "parameter_error"}
-    used_names = {c.name for c in chosen.ranked}
-    return [r for r in ranking if r.significant and r.name not in used_names
-            and r.result.effect not in used
-            and not (r.result.effect == "parameter_error"
-                     and any(k in chosen.added for k in r.result.plant_values))][:3]
 
 
 def _gain(chosen: Sequence[Ranked], i: int, err0: np.ndarray) -> np.ndarray:
