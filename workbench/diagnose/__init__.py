@@ -10,7 +10,8 @@ The method is split into parts (one concept per module):
 * :mod:`.locate` -- operating regimes and time intervals of the mismatch;
 * :mod:`.candidates` -- the effects of formats.md section 2 and wrong nominal values;
 * :mod:`.refit` -- signature scan and least-squares refit of one candidate;
-* :mod:`.explain` -- all candidates in parallel, ranked by evidence;
+* :mod:`.explain` -- all candidates in parallel, ranked by evidence; the findings chosen;
+* :mod:`.evidence` -- a finding's evidence sentence and confidence;
 * :mod:`.polish` -- a finding's values refined by the grey-box estimator;
 * :mod:`.core` -- :func:`diagnose`: replay, locate, explain, augment, refit;
 * :mod:`.report`, :mod:`.figures` -- the HTML/PDF report (``workbench diagnose`` is

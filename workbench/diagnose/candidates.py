@@ -134,80 +134,127 @@ def candidates(params: PlantParams, effects: Sequence[str] | None = None,
     effects : restrict to these names (effect names, ``"parameter_error"`` or
         ``"parameter_error:<key>"``); default all.
     has_pressures : leave out what only pressures show when they are not recorded.
+
+    Raises
+    ------
+    InputError
+        A name in ``effects`` that is neither an effect, ``parameter_error`` nor a
+        candidate.
     """
-    c_valve = params["valve.sonic_conductance"] if "valve.sonic_conductance" in params else 6e-8
-    area = math.pi / 4 * params["cylinder.bore"] ** 2
-    f_max = (params["supply.pressure"] - params["gas.atmospheric_pressure"]) * area
-    span = params["valve.command_span"]
-    mass = params["load.mass"]
-    beta = params["load.viscous_friction"]
-    v_chamber = area * params["cylinder.stroke"]
-    out: list[Candidate] = []
+    sc = _Scales.of(params)
     have = set(params.effects)
+    out = [c for c in _valve_and_friction(sc) + _air_path(sc) if c.effect not in have]
+    out += _parameter_errors(params, sc)
+    if effects:
+        out = _selected(out, effects)
+    if not has_pressures:
+        out = [c for c in out if not c.needs_pressures]
+    return out
 
-    def add(c: Candidate) -> None:
-        if c.effect != "parameter_error" and c.effect in have:
-            return
-        out.append(c)
 
-    add(Candidate(
-        "dry_friction", "dry_friction",
-        (Free("friction.coulomb", 1e-3 * f_max, 0.6 * f_max, 0.05 * f_max),
-         Free("friction.static_excess", 0.0, 3.0, 0.3, log=False, scale=1.0),
-         Free("friction.stribeck_velocity", 1e-3, 0.2, 0.01)),
-        grid={"friction.coulomb": [f_max * s for s in (0.015, 0.04, 0.08, 0.15, 0.3)],
-              "friction.static_excess": [0.0, 0.5],
-              "friction.stribeck_velocity": [0.01]},
-        describe="Coulomb and static (break-away) friction with a Stribeck curve"))
-    add(Candidate(
-        "valve_deadband", "valve_deadband",
-        (Free("valve.deadband", 0.002, 0.45, 0.03),),
-        grid={"valve.deadband": [0.01, 0.025, 0.05, 0.08, 0.12, 0.2]},
-        describe="spool overlap: no flow for commands near the centre"))
-    add(Candidate(
-        "valve_offset", "valve_offset",
-        (Free("valve.null_offset", -0.3 * span, 0.3 * span, 0.0, log=False, scale=0.02 * span),),
-        grid={"valve.null_offset": [s * span for s in (-0.08, -0.04, -0.02, -0.01,
-                                                        0.01, 0.02, 0.04, 0.08)]},
-        describe="the spool is centred at another command than command_center"))
-    add(Candidate(
-        "valve_dynamics", "valve_dynamics",
-        (Free("valve.bandwidth", 2.0, 400.0, 40.0), Free("valve.damping", 0.2, 3.0, 0.8)),
-        grid={"valve.bandwidth": [8.0, 20.0, 50.0], "valve.damping": [0.7]},
-        needs_pressures=False,
-        describe="the spool follows the command through a 2nd-order lag"))
-    add(Candidate(
-        "line_dynamics", "line_dynamics",
-        (Free("lines.length", 0.05, 30.0, 1.0), Free("lines.diameter", 1.5e-3, 15e-3, 4e-3)),
-        fixed={"lines.segments": LINE_SEGMENTS},
-        grid={"lines.length": [0.7, 2.0, 5.0], "lines.diameter": [3e-3, 5e-3]},
-        needs_pressures=True,
-        describe="valve-chamber lines: extra volume, transport delay, pressure drop"))
-    # leak conductances scaled with the valve: 1e-4 .. 0.03 of one valve edge
-    add(Candidate(
-        "leakage", "leakage",
-        (Free("leakage.conductance_to_atmosphere", 0.0, 0.03 * c_valve, 2e-3 * c_valve,
-              log=False, scale=1e-3 * c_valve),
-         Free("leakage.cross_piston", 0.0, 1e-6, 0.0, log=False, scale=1e-9)),
-        grid={"leakage.conductance_to_atmosphere": [c_valve * s for s in
-                                                    (0.0, 5e-4, 1.5e-3, 4e-3, 1e-2)],
-              "leakage.cross_piston": [0.0, 3e-9]},
-        needs_pressures=True,
-        describe="leaks from the chambers to atmosphere and across the piston"))
-    add(Candidate(
-        "supply_droop", "supply_droop",
-        (Free("supply.reservoir_volume", 0.02 * v_chamber, 500 * v_chamber, 5 * v_chamber),
-         Free("supply.regulator_conductance", 0.02 * c_valve, 20.0 * c_valve, 0.3 * c_valve)),
-        grid={"supply.reservoir_volume": [v_chamber * s for s in (0.5, 3.0, 20.0)],
-              "supply.regulator_conductance": [c_valve * s for s in (0.08, 0.25, 0.8)]},
-        needs_pressures=True,
-        describe="the supply pressure sags under flow (reservoir behind a regulator)"))
-    add(Candidate(
-        "heat_transfer", "heat_transfer",
-        (Free("gas.heat_transfer_coefficient", 1e-3, 50.0, 0.5),),
-        grid={"gas.heat_transfer_coefficient": [0.05, 0.3, 1.5, 8.0]},
-        needs_pressures=True,
-        describe="chamber gas temperature varies (adiabatic when fast, isothermal when slow)"))
+@dataclass(frozen=True)
+class _Scales:
+    """Sizes of the nominal rig the candidates' bounds and grids scale with (SI)."""
+
+    c_valve: float      #: sonic conductance of one valve edge, m^3/(s Pa)
+    f_max: float        #: force capacity (p_s - p_atm) A, N
+    span: float         #: valve command span, V
+    mass: float         #: moving mass, kg
+    beta: float         #: viscous friction, N s/m
+    v_chamber: float    #: swept volume A L, m^3
+    p_supply: float     #: supply pressure, Pa
+
+    @classmethod
+    def of(cls, params: PlantParams) -> "_Scales":
+        area = math.pi / 4 * params["cylinder.bore"] ** 2
+        return cls(c_valve=params["valve.sonic_conductance"]
+                   if "valve.sonic_conductance" in params else 6e-8,
+                   f_max=(params["supply.pressure"] - params["gas.atmospheric_pressure"]) * area,
+                   span=params["valve.command_span"], mass=params["load.mass"],
+                   beta=params["load.viscous_friction"],
+                   v_chamber=area * params["cylinder.stroke"],
+                   p_supply=params["supply.pressure"])
+
+
+def _valve_and_friction(sc: _Scales) -> list[Candidate]:
+    """Dry friction and the valve's deadband, null offset and spool dynamics."""
+    f_max, span = sc.f_max, sc.span
+    return [
+        Candidate(
+            "dry_friction", "dry_friction",
+            (Free("friction.coulomb", 1e-3 * f_max, 0.6 * f_max, 0.05 * f_max),
+             Free("friction.static_excess", 0.0, 3.0, 0.3, log=False, scale=1.0),
+             Free("friction.stribeck_velocity", 1e-3, 0.2, 0.01)),
+            grid={"friction.coulomb": [f_max * s for s in (0.015, 0.04, 0.08, 0.15, 0.3)],
+                  "friction.static_excess": [0.0, 0.5],
+                  "friction.stribeck_velocity": [0.01]},
+            describe="Coulomb and static (break-away) friction with a Stribeck curve"),
+        Candidate(
+            "valve_deadband", "valve_deadband",
+            (Free("valve.deadband", 0.002, 0.45, 0.03),),
+            grid={"valve.deadband": [0.01, 0.025, 0.05, 0.08, 0.12, 0.2]},
+            describe="spool overlap: no flow for commands near the centre"),
+        Candidate(
+            "valve_offset", "valve_offset",
+            (Free("valve.null_offset", -0.3 * span, 0.3 * span, 0.0, log=False,
+                  scale=0.02 * span),),
+            grid={"valve.null_offset": [s * span for s in (-0.08, -0.04, -0.02, -0.01,
+                                                            0.01, 0.02, 0.04, 0.08)]},
+            describe="the spool is centred at another command than command_center"),
+        Candidate(
+            "valve_dynamics", "valve_dynamics",
+            (Free("valve.bandwidth", 2.0, 400.0, 40.0), Free("valve.damping", 0.2, 3.0, 0.8)),
+            grid={"valve.bandwidth": [8.0, 20.0, 50.0], "valve.damping": [0.7]},
+            needs_pressures=False,
+            describe="the spool follows the command through a 2nd-order lag"),
+    ]
+
+
+def _air_path(sc: _Scales) -> list[Candidate]:
+    """Lines, leakage, supply droop and heat transfer (seen in the pressures)."""
+    c_valve, v_chamber = sc.c_valve, sc.v_chamber
+    return [
+        Candidate(
+            "line_dynamics", "line_dynamics",
+            (Free("lines.length", 0.05, 30.0, 1.0), Free("lines.diameter", 1.5e-3, 15e-3, 4e-3)),
+            fixed={"lines.segments": LINE_SEGMENTS},
+            grid={"lines.length": [0.7, 2.0, 5.0], "lines.diameter": [3e-3, 5e-3]},
+            needs_pressures=True,
+            describe="valve-chamber lines: extra volume, transport delay, pressure drop"),
+        # leak conductances scaled with the valve: 1e-4 .. 0.03 of one valve edge
+        Candidate(
+            "leakage", "leakage",
+            (Free("leakage.conductance_to_atmosphere", 0.0, 0.03 * c_valve, 2e-3 * c_valve,
+                  log=False, scale=1e-3 * c_valve),
+             Free("leakage.cross_piston", 0.0, 1e-6, 0.0, log=False, scale=1e-9)),
+            grid={"leakage.conductance_to_atmosphere": [c_valve * s for s in
+                                                        (0.0, 5e-4, 1.5e-3, 4e-3, 1e-2)],
+                  "leakage.cross_piston": [0.0, 3e-9]},
+            needs_pressures=True,
+            describe="leaks from the chambers to atmosphere and across the piston"),
+        Candidate(
+            "supply_droop", "supply_droop",
+            (Free("supply.reservoir_volume", 0.02 * v_chamber, 500 * v_chamber, 5 * v_chamber),
+             Free("supply.regulator_conductance", 0.02 * c_valve, 20.0 * c_valve,
+                  0.3 * c_valve)),
+            grid={"supply.reservoir_volume": [v_chamber * s for s in (0.5, 3.0, 20.0)],
+                  "supply.regulator_conductance": [c_valve * s for s in (0.08, 0.25, 0.8)]},
+            needs_pressures=True,
+            describe="the supply pressure sags under flow (reservoir behind a regulator)"),
+        Candidate(
+            "heat_transfer", "heat_transfer",
+            (Free("gas.heat_transfer_coefficient", 1e-3, 50.0, 0.5),),
+            grid={"gas.heat_transfer_coefficient": [0.05, 0.3, 1.5, 8.0]},
+            needs_pressures=True,
+            describe="chamber gas temperature varies (adiabatic when fast, isothermal when "
+                     "slow)"),
+    ]
+
+
+def _parameter_errors(params: PlantParams, sc: _Scales) -> list[Candidate]:
+    """Wrong nominal values (:data:`PARAMETER_ERROR_KEYS`); no conductance error for a
+    valve law other than ISO 6358."""
+    mass, beta, f_max, c_valve, p_s = sc.mass, sc.beta, sc.f_max, sc.c_valve, sc.p_supply
     pe = [
         Candidate("parameter_error:load.mass", "parameter_error",
                   (Free("load.mass", 0.1 * mass, 20.0 * mass, mass),),
@@ -224,24 +271,22 @@ def candidates(params: PlantParams, effects: Sequence[str] | None = None,
                   grid={"valve.sonic_conductance": [c_valve * s for s in (0.6, 0.85, 1.2, 1.6)]},
                   describe="the valve passes more or less air than its nominal conductance"),
         Candidate("parameter_error:supply.pressure", "parameter_error",
-                  (Free("supply.pressure", 0.6 * params["supply.pressure"],
-                        1.3 * params["supply.pressure"], params["supply.pressure"]),),
-                  grid={"supply.pressure": [params["supply.pressure"] * s
-                                            for s in (0.85, 0.95, 1.05)]},
+                  (Free("supply.pressure", 0.6 * p_s, 1.3 * p_s, p_s),),
+                  grid={"supply.pressure": [p_s * s for s in (0.85, 0.95, 1.05)]},
                   needs_pressures=True,
                   describe="the supply pressure is not the nominal one"),
     ]
     if params.get("valve.law", "iso6358") != "iso6358":
         pe = [c for c in pe if "sonic_conductance" not in c.name]
-    out += pe
-    if effects:
-        wanted = set(effects)
-        unknown = wanted - set(EFFECT_NAMES) - {"parameter_error"} - {c.name for c in out}
-        if unknown:
-            from ..errors import InputError
-            raise InputError(f"unknown candidate(s) {', '.join(sorted(unknown))}; known: "
-                             + ", ".join(list(EFFECT_NAMES) + ["parameter_error"]))
-        out = [c for c in out if c.name in wanted or c.effect in wanted]
-    if not has_pressures:
-        out = [c for c in out if not c.needs_pressures]
-    return out
+    return pe
+
+
+def _selected(cands: list[Candidate], effects: Sequence[str]) -> list[Candidate]:
+    """The candidates named in ``effects`` (by effect or candidate name)."""
+    wanted = set(effects)
+    unknown = wanted - set(EFFECT_NAMES) - {"parameter_error"} - {c.name for c in cands}
+    if unknown:
+        from ..errors import InputError
+        raise InputError(f"unknown candidate(s) {', '.join(sorted(unknown))}; known: "
+                         + ", ".join(list(EFFECT_NAMES) + ["parameter_error"]))
+    return [c for c in cands if c.name in wanted or c.effect in wanted]

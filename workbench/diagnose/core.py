@@ -41,8 +41,8 @@ Examples
 from __future__ import annotations
 
 import json
-import math
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,9 +56,10 @@ from ..plant import Plant
 from ..recording import Recording, fit
 from .candidates import Candidate, candidates as make_candidates
 from .data import Prepared, prepare
-from .explain import Ranked, rank, refit_all
-from .locate import concentration, consistency, intervals, regimes, smooth_error
-from .predict import horizons, segments
+from .evidence import confidence, evidence_text
+from .explain import Chosen, Ranked, Refits, choose, promising, refit_fully, screen
+from .locate import concentration, intervals, regimes, smooth_error
+from .predict import Predictor, horizons, segments
 from .refit import CandidateModel
 from .witness import Witness, observer_inputs
 
@@ -66,12 +67,6 @@ __all__ = ["Finding", "Diagnosis", "diagnose", "replay"]
 
 #: s: anchor spacing of the open-loop replay reported when there is no closed loop.
 OPEN_ANCHOR = 0.5
-#: Further findings looked for after the first.
-MAX_EXTRA = 2
-#: Least-squares iterations of the screening refit of every candidate.
-SCREEN_NFEV = 3
-#: Candidates refitted fully after the screening.
-FULL_REFITS = 4
 
 
 @dataclass(frozen=True)
@@ -102,7 +97,7 @@ class Finding:
     ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """The finding as in formats.md section 4 (one entry of ``findings``)."""
+        """This finding as in the diagnosis JSON (formats.md section 4)."""
         return {"effect": self.effect, "confidence": round(float(self.confidence), 3),
                 "parameters": {k: _num(v) for k, v in self.parameters.items()},
                 "where": [[float(a), float(b)] for a, b in self.where],
@@ -268,71 +263,6 @@ def _fits(prep: Prepared, sim: Mapping[str, np.ndarray]) -> dict[str, float]:
     return out
 
 
-# ---------------------------------------------------------------------- evidence texts
-def _fmt_where(conc: Mapping[str, Mapping[str, float]], name: str) -> str:
-    best = sorted(conc.items(), key=lambda kv: -kv[1]["ratio"])
-    top = [(k, v) for k, v in best if v["time_share"] > 0.01 and v["ratio"] >= 1.3][:2]
-    parts = [f"{k} ({v['ratio']:.1f}x its share of time)" for k, v in top]
-    return ("mostly " + " and ".join(parts)) if parts else "throughout the recording"
-
-
-def _evidence(r: Ranked, cand: Candidate, conc: Mapping[str, Mapping[str, float]],
-              prep: Prepared) -> str:
-    v = r.result.values
-    pv = r.result.plant_values
-    name = r.name
-    where = _fmt_where(conc, name)
-    gain = f"adding it removes {100 * r.gain:.0f} % of the short-horizon prediction error"
-    if name == "dry_friction":
-        what = (f"the piston sticks and the pressures build up to a break-away force of "
-                f"{pv['friction.static']:.3g} N before it moves, then slides against "
-                f"{pv['friction.coulomb']:.3g} N")
-    elif name == "valve_deadband":
-        what = (f"commands within {100 * v['valve.deadband']:.2g} % of the span around the "
-                f"centre move no air (pressures flat, piston stopped short of r)")
-    elif name == "valve_offset":
-        closed_at = prep.plant.params["valve.command_center"] + v["valve.null_offset"]
-        what = (f"the valve is closed at u = {closed_at:.3g} V, not at the nominal centre "
-                f"(steady error and drifting pressures at rest)")
-    elif name == "valve_dynamics":
-        what = (f"the pressures answer command steps with a lag "
-                f"({v['valve.bandwidth']:.3g} Hz, damping {v['valve.damping']:.2g})")
-    elif name == "line_dynamics":
-        what = (f"pressure transients are delayed and damped as by {v['lines.length']:.3g} m "
-                f"lines of {1e3 * v['lines.diameter']:.2g} mm")
-    elif name == "leakage":
-        what = (f"the chamber pressures decay while the valve is closed "
-                f"(leak conductance {v['leakage.conductance_to_atmosphere']:.3g} m^3/(s Pa) "
-                f"to atmosphere, {v['leakage.cross_piston']:.3g} kg/(s Pa) across the piston)")
-    elif name == "supply_droop":
-        what = (f"the pressures rise more slowly at large openings, as from a "
-                f"{1e3 * v['supply.reservoir_volume']:.3g} l reservoir behind a regulator")
-    elif name == "heat_transfer":
-        what = (f"pressures overshoot in fast transients and relax afterwards, as gas "
-                f"heated by compression cools through the walls "
-                f"({v['gas.heat_transfer_coefficient']:.3g} W/K)")
-    else:
-        key = name.split(":", 1)[1]
-        nominal = prep.plant.params[key]
-        new = pv[key]
-        what = f"{key} fits as {new:.4g} instead of the nominal {nominal:.4g}"
-    return f"Mismatch {where}: {what}; {gain}."
-
-
-def _confidence(r: Ranked, runner_up: Ranked | None) -> float:
-    """BIC weight against the runner-up and "nothing", tempered by the share explained."""
-    if runner_up is None or not np.isfinite(runner_up.dbic):
-        w = 1.0 / (1.0 + math.exp(-0.5 * r.dbic)) if r.dbic < 60 else 1.0
-    else:
-        d = r.dbic - runner_up.dbic
-        w = 1.0 / (1.0 + math.exp(-0.5 * d)) if abs(d) < 60 else (1.0 if d > 0 else 0.0)
-        w = min(w, 1.0 / (1.0 + math.exp(-0.5 * r.dbic)) if r.dbic < 60 else 1.0)
-    w *= 0.6 + 0.4 * min(max(r.gain, 0.0), 1.0)
-    if r.consistency is not None and r.consistency < 0.5:
-        w *= 0.85
-    return float(min(max(w, 0.0), 0.99))
-
-
 # ---------------------------------------------------------------------- the diagnosis
 def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Recording,
              effects: Sequence[str] | None = None, workers: int | None = None,
@@ -365,17 +295,93 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
     InputError
         Unusable input (see :func:`.data.prepare`).
     """
-    t_start = time.perf_counter()
-    timings: dict[str, float] = {}
+    clock = _Clock(verbose)
+    plant, plant_file, recording, rec_file = _load(plant, recording)
+    clock.restart()
+    prep = prepare(plant, recording, mode)
+    params = plant.params
+    clock.tick("prepare")
+    # 1. replay on the nominal plant
+    sim0 = replay(plant, prep)
+    fit_before = _fits(prep, sim0)
+    clock.tick("nominal replay")
+    # 2. comparable predictions, witnesses, regimes
+    nom = _nominal(prep, params, jit)
+    clock.tick("witnesses and regimes")
+    # 3. explain: every candidate screened, the most promising refitted fully
+    cands = make_candidates(params, effects, prep.has_pressures)
+    refits = Refits(prep, params, nom.shpe, nom.seg, nom.masks, workers, jit)
+    nothing = Chosen.nothing(nom.cost, nom.seg_cost, nom.err)
+    ranking = screen(refits, cands, nothing)
+    clock.tick("candidates screened")
+    top = promising(ranking)
+    if top:
+        ranking = refit_fully(refits, cands, ranking, top, max_nfev, nothing)
+        clock.tick("best candidates refitted")
+    # 4. choose findings (greedy) and polish their values
+    by_name = {c.name: c for c in cands}
+    chosen = choose(refits, cands, ranking, max_nfev, nothing,
+                    lambda: budget_s is not None and clock.elapsed() > budget_s)
+    if chosen.ranked:
+        clock.tick("further findings")
+    polished: dict[str, Any] = {}
+    if polish_values and chosen.ranked:
+        polished = _polish_findings(prep, params, chosen.ranked, by_name, nom.err)
+        clock.tick("grey-box polish")
+    # 5. model and refit: the augmented plant replayed like the nominal one
+    findings, aug, sim_after = _findings(prep, params, chosen.ranked, ranking, by_name, nom)
+    witness_after: dict[str, np.ndarray] = {}
+    if findings and prep.has_pressures:
+        witness_after = _witness_after(prep, nom.wit, aug, jit)
+    if findings:
+        clock.tick("augmented replay")
+    return Diagnosis(
+        plant_file=plant_file, recording_file=rec_file, fit_before=fit_before,
+        fit_after=findings[-1].fit_after if findings else dict(fit_before), findings=findings,
+        ranking=ranking, located=nom.located, regime_share=nom.share,
+        notes=list(prep.notes) + ([] if findings else _no_finding_note(ranking)),
+        mode=_mode_text(prep), nominal=params, augmented=aug, prep=prep, replay_nominal=sim0,
+        replay_augmented=sim_after, witness=nom.witness, witness_after=witness_after,
+        err_nominal=nom.err, err_after=chosen.err if findings else None, cost_nominal=nom.cost,
+        cost_after=chosen.cost, timings=clock.total(), polished=polished)
 
-    def tick(name: str, t0: float) -> float:
+
+class _Clock:
+    """Wall time of each step of the diagnosis (``Diagnosis.timings``, s), printed to
+    stderr as it goes when ``verbose``."""
+
+    def __init__(self, verbose: bool) -> None:
+        self.verbose = verbose
+        self.start = time.perf_counter()
+        self.last = self.start
+        self.timings: dict[str, float] = {}
+
+    def restart(self) -> None:
+        """The next step is timed from now."""
+        self.last = time.perf_counter()
+
+    def tick(self, name: str) -> None:
+        """Record the step ``name`` as ending now."""
         now = time.perf_counter()
-        timings[name] = round(now - t0, 3)
-        if verbose:
-            import sys
-            print(f"  [{now - t_start:6.1f} s] {name}", file=sys.stderr, flush=True)
-        return now
+        self.timings[name] = round(now - self.last, 3)
+        if self.verbose:
+            print(f"  [{now - self.start:6.1f} s] {name}", file=sys.stderr, flush=True)
+        self.last = now
 
+    def elapsed(self) -> float:
+        """s since the diagnosis started."""
+        return time.perf_counter() - self.start
+
+    def total(self) -> dict[str, float]:
+        """The step timings with the total wall time added."""
+        self.timings["total"] = round(self.elapsed(), 3)
+        return self.timings
+
+
+def _load(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Recording
+          ) -> tuple[Plant, str, Recording, str]:
+    """The plant (stick-slip friction) and recording, loaded when given as files, and
+    the file names the result reports."""
     plant_file = str(plant) if not isinstance(plant, Plant) else plant.params.source
     if not isinstance(plant, Plant):
         plant = Plant.from_toml(plant)
@@ -385,173 +391,137 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
         recording = load_recording(recording)
     if plant.friction != "stick":
         plant = plant.with_friction("stick")
-    t0 = time.perf_counter()
-    prep = prepare(plant, recording, mode)
-    notes = list(prep.notes)
-    params = plant.params
-    t0 = tick("prepare", t0)
+    return plant, plant_file, recording, rec_file
 
-    # 1. replay on the nominal plant
-    sim0 = replay(plant, prep)
-    fit_before = _fits(prep, sim0)
-    mode_txt = ("closed loop on r with the plant file's controller" if prep.closed else
-                f"open loop on u, re-anchored on the measured state every {OPEN_ANCHOR:g} s")
-    t0 = tick("nominal replay", t0)
 
-    # 2. comparable predictions, witnesses, regimes
-    shpe = horizons(prep)
-    seg = segments(prep) if prep.closed else None
-    if not prep.has_pressures and prep.closed:
-        shpe = segments(prep, 1.0)      # open-loop horizons drift without pressures
-        seg = None
+def _mode_text(prep: Prepared) -> str:
+    """How the recording was replayed, in words."""
+    if prep.closed:
+        return "closed loop on r with the plant file's controller"
+    return f"open loop on u, re-anchored on the measured state every {OPEN_ANCHOR:g} s"
+
+
+@dataclass
+class _Nominal:
+    """The nominal plant against the recording: the predictors, the short-horizon cost
+    and per-sample error, the closed-loop segment cost, the witnesses, the operating
+    regimes and where the mismatch lives."""
+
+    shpe: Predictor
+    seg: Predictor | None
+    cost: float
+    seg_cost: float | None
+    err: np.ndarray
+    wit: Witness
+    masks: dict[str, np.ndarray]
+    witness: dict[str, np.ndarray]
+    share: dict[str, dict[str, float]]
+    located: list[list[float]]
+
+
+def _predictors(prep: Prepared) -> tuple[Predictor, Predictor | None]:
+    """The refit objective (short-horizon predictions) and its closed-loop check
+    (re-anchored segments, closed loop only)."""
+    if prep.closed and not prep.has_pressures:
+        return segments(prep, 1.0), None     # open-loop horizons drift without pressures
+    return horizons(prep), (segments(prep) if prep.closed else None)
+
+
+def _nominal(prep: Prepared, params: PlantParams, jit: bool) -> _Nominal:
+    """Step 2: the nominal model's predictions, witnesses and regimes."""
+    shpe, seg = _predictors(prep)
     base = CandidateModel(prep, params, None, jit=jit)
     Y0 = base.run(shpe, {})
-    cost0 = shpe.cost(Y0)
-    err0 = shpe.error_by_sample(Y0)
-    seg0 = seg.cost(base.run(seg, {})) if seg is not None else None
+    err = shpe.error_by_sample(Y0)
+    seg_cost = seg.cost(base.run(seg, {})) if seg is not None else None
     wit = Witness.build(prep)
     masks = regimes(prep, wit.v_rest)
-    witness0: dict[str, np.ndarray] = {}
+    witness: dict[str, np.ndarray] = {}
     if prep.has_pressures:
-        witness0 = wit.in_units(wit.residuals(_observer_rates(prep, params, jit)))
-    conc0 = concentration(err0, masks)
-    e_s = smooth_error(err0, prep.dt)
+        witness = wit.in_units(wit.residuals(_observer_rates(prep, params, jit)))
+    e_s = smooth_error(err, prep.dt)
     floor = float(np.nanmedian(e_s[e_s > 0])) if np.any(e_s > 0) else 0.0
     located = intervals(e_s, prep.t, max(5.0 * floor, 3.0 * len(prep.signals)))
-    t0 = tick("witnesses and regimes", t0)
+    return _Nominal(shpe=shpe, seg=seg, cost=shpe.cost(Y0), seg_cost=seg_cost, err=err,
+                    wit=wit, masks=masks, witness=witness, share=concentration(err, masks),
+                    located=located)
 
-    # 3. explain: refit every candidate
-    cands = make_candidates(params, effects, prep.has_pressures)
-    # every candidate: signature scan and a short refit; the most promising: a full refit
-    results = refit_all(prep, params, cands, shpe, seg, workers=workers, max_nfev=SCREEN_NFEV,
-                        jit=jit)
 
-    def _cons(rs, err_ref):
-        return {r.name: consistency(err_ref - r.err, masks, r.name) if r.err is not None
-                else None for r in rs}
+def _gain(chosen: Sequence[Ranked], i: int, err0: np.ndarray) -> np.ndarray:
+    """Per-sample short-horizon error that finding ``i`` removes on top of the earlier ones."""
+    return (err0 if i == 0 else chosen[i - 1].result.err) - chosen[i].result.err
 
-    ranking = rank(results, cost0, seg0, shpe.n_eff, _cons(results, err0))
-    t0 = tick("candidates screened", t0)
-    top = [r for r in ranking if np.isfinite(r.dbic) and r.dbic > 0][:FULL_REFITS]
-    if top:
-        by = {c.name: c for c in cands}
-        again = refit_all(prep, params, [by[r.name] for r in top], shpe, seg, workers=workers,
-                          max_nfev=max_nfev, jit=jit,
-                          starts={r.name: r.result.values for r in top})
-        merged = {r.name: r for r in results}
-        for r_old, r_new in zip(top, again):
-            if r_new.error is None and r_new.cost <= r_old.result.cost:
-                r_new.grid = r_old.result.grid
-                r_new.nfev += r_old.result.nfev
-                r_new.wall_s += r_old.result.wall_s
-                merged[r_new.name] = r_new
-        results = [merged[c.name] for c in cands]
-        ranking = rank(results, cost0, seg0, shpe.n_eff, _cons(results, err0))
-        t0 = tick("best candidates refitted", t0)
 
-    # 4. choose findings (greedy), model and refit
-    by_name = {c.name: c for c in cands}
-    chosen: list[Ranked] = []
-    if ranking and ranking[0].significant:
-        chosen.append(ranking[0])
-    added: dict[str, Any] = dict(chosen[0].result.plant_values) if chosen else {}
-    cost_cur = chosen[0].result.cost if chosen else cost0
-    seg_cur = chosen[0].result.seg_cost if chosen else seg0
-    err_cur = chosen[0].result.err if chosen else err0
-    for _ in range(MAX_EXTRA):
-        if not chosen or (budget_s is not None and time.perf_counter() - t_start > budget_s):
-            break
-        if (cost0 - cost_cur) / cost0 > 0.97:
-            break                      # nothing left worth a further effect
-        used = {c.result.effect for c in chosen if c.result.effect != "parameter_error"}
-        used_names = {c.name for c in chosen}
-        others = [r for r in ranking if r.significant and r.name not in used_names
-                  and r.result.effect not in used
-                  and not (r.result.effect == "parameter_error"
-                           and any(k in added for k in r.result.plant_values))][:3]
-        if not others:
-            break
-        more = refit_all(prep, params, [by_name[r.name] for r in others], shpe, seg,
-                         workers=workers, max_nfev=max_nfev, jit=jit, base=added,
-                         starts={r.name: r.result.values for r in others})
-        ranked2 = rank(more, cost_cur, seg_cur, shpe.n_eff,
-                       {r.name: consistency(err_cur - r.err, masks, r.name)
-                        if r.err is not None else None for r in more})
-        if not ranked2 or not ranked2[0].significant:
-            break
-        chosen.append(ranked2[0])
-        added.update(ranked2[0].result.plant_values)
-        cost_cur, seg_cur, err_cur = (ranked2[0].result.cost, ranked2[0].result.seg_cost,
-                                      ranked2[0].result.err)
-    if chosen:
-        t0 = tick("further findings", t0)
-
-    # 5. polish each finding's values with the grey-box estimator (a local refinement
-    # on the windows where it removes most of the mismatch; the refit's values stand
-    # when it fails or jumps)
+def _polish_findings(prep: Prepared, params: PlantParams, chosen: Sequence[Ranked],
+                     by_name: Mapping[str, Candidate], err0: np.ndarray) -> dict[str, Any]:
+    """Each finding's values refined by the grey-box estimator on the windows where it
+    removes most of the mismatch (in place; the refit's values stand when the polish
+    fails or jumps). Returns what was polished, for ``details.json``."""
+    from .polish import polish
     polished: dict[str, Any] = {}
-    if polish_values:
-        from .polish import polish as _polish
-        base_pv = params
-        for i, r in enumerate(chosen):
-            gain_i = (err0 if i == 0 else chosen[i - 1].result.err) - r.result.err
-            pol = _polish(prep, base_pv, by_name[r.name], r.result.values, gain_i)
-            if pol is not None:
-                cand = by_name[r.name]
-                r.result.values = pol.values
-                r.result.plant_values = cand.plant_values(pol.values)
-                r.result.std = {**r.result.std, **pol.std}
-                r.result.ci95 = {**r.result.ci95, **pol.ci95}
-                polished[r.name] = {"windows_s": pol.windows, "status": pol.status,
-                                    "wall_s": round(pol.wall_s, 2)}
-            base_pv = base_pv.replace(**r.result.plant_values)
-        if chosen:
-            t0 = tick("grey-box polish", t0)
+    base = params
+    for i, r in enumerate(chosen):
+        cand = by_name[r.name]
+        pol = polish(prep, base, cand, r.result.values, _gain(chosen, i, err0))
+        if pol is not None:
+            r.result.values = pol.values
+            r.result.plant_values = cand.plant_values(pol.values)
+            r.result.std = {**r.result.std, **pol.std}
+            r.result.ci95 = {**r.result.ci95, **pol.ci95}
+            polished[r.name] = {"windows_s": pol.windows, "status": pol.status,
+                                "wall_s": round(pol.wall_s, 2)}
+        base = base.replace(**r.result.plant_values)
+    return polished
 
+
+def _findings(prep: Prepared, params: PlantParams, chosen: Sequence[Ranked],
+              ranking: Sequence[Ranked], by_name: Mapping[str, Candidate], nom: _Nominal
+              ) -> tuple[list[Finding], PlantParams, dict[str, np.ndarray]]:
+    """The findings, each with the fit of the plant augmented by it and the earlier
+    ones; the augmented parameters and the last augmented replay ({} without findings)."""
     findings: list[Finding] = []
     aug = params
-    sim_after = sim0
-    fit_after = dict(fit_before)
+    sim_after: dict[str, np.ndarray] = {}
     for i, r in enumerate(chosen):
         aug = aug.replace(**r.result.plant_values)
         sim_after = replay(Plant(aug), prep)
-        fa = _fits(prep, sim_after)
-        gain_i = (err0 if i == 0 else chosen[i - 1].result.err) - r.result.err
-        g_s = smooth_error(gain_i, prep.dt)
-        where = intervals(g_s, prep.t, 0.2 * float(np.nanmax(g_s)) if np.nanmax(g_s) > 0 else 1.0)
-        runner = next((o for o in ranking if o is not r and o.name != r.name), None) if i == 0 \
-            else None
-        conc_i = concentration(gain_i, masks)
-        cand = by_name[r.name]
-        findings.append(Finding(
-            effect=r.result.effect, confidence=_confidence(r, runner),
-            parameters=cand.reported(r.result.values), where=where,
-            evidence=_evidence(r, cand, conc_i, prep), fit_after=fa, name=r.name,
-            plant_values=dict(r.result.plant_values), std=dict(r.result.std),
-            ci95=dict(r.result.ci95)))
-        fit_after = fa
-    witness_after: dict[str, np.ndarray] = {}
-    if findings and prep.has_pressures:
-        fr = None
-        p_obs = aug
-        if aug.has_effect("dry_friction"):
-            fr = {k: aug[f"friction.{k}"] for k in ("coulomb", "static", "stribeck_velocity")}
-            p_obs = aug.without_effect("dry_friction")
-        witness_after = wit.in_units(wit.residuals(_observer_rates(prep, p_obs, jit), fr))
-    if findings:
-        t0 = tick("augmented replay", t0)
-    if not findings:
-        best = ranking[0] if ranking else None
-        if best is not None:
-            notes.append(f"no candidate is significant; the best, {best.name}, would remove "
-                         f"{100 * best.gain:.0f} % of the short-horizon prediction error "
-                         f"({best.reason})")
-    timings["total"] = round(time.perf_counter() - t_start, 3)
-    return Diagnosis(
-        plant_file=plant_file, recording_file=rec_file, fit_before=fit_before,
-        fit_after=fit_after, findings=findings, ranking=ranking, located=located,
-        regime_share=conc0, notes=notes, mode=mode_txt, nominal=params, augmented=aug,
-        prep=prep, replay_nominal=sim0, replay_augmented=sim_after if findings else {},
-        witness=witness0, witness_after=witness_after, err_nominal=err0,
-        err_after=err_cur if findings else None, cost_nominal=cost0,
-        cost_after=cost_cur if findings else cost0, timings=timings, polished=polished)
+        runner = next((o for o in ranking if o is not r and o.name != r.name), None) \
+            if i == 0 else None
+        findings.append(_finding(prep, r, by_name[r.name], _gain(chosen, i, nom.err), runner,
+                                 _fits(prep, sim_after), nom.masks))
+    return findings, aug, sim_after
+
+
+def _finding(prep: Prepared, r: Ranked, cand: Candidate, gain: np.ndarray,
+             runner: Ranked | None, fit_after: dict[str, float],
+             masks: Mapping[str, np.ndarray]) -> Finding:
+    """One finding: where it removes the mismatch, its confidence and evidence text."""
+    g_s = smooth_error(gain, prep.dt)
+    where = intervals(g_s, prep.t, 0.2 * float(np.nanmax(g_s)) if np.nanmax(g_s) > 0 else 1.0)
+    return Finding(
+        effect=r.result.effect, confidence=confidence(r, runner),
+        parameters=cand.reported(r.result.values), where=where,
+        evidence=evidence_text(r, cand, concentration(gain, masks), prep), fit_after=fit_after,
+        name=r.name, plant_values=dict(r.result.plant_values), std=dict(r.result.std),
+        ci95=dict(r.result.ci95))
+
+
+def _witness_after(prep: Prepared, wit: Witness, aug: PlantParams, jit: bool
+                   ) -> dict[str, np.ndarray]:
+    """Flow and force witnesses of the augmented plant (dry friction, if found, is taken
+    out of the observer and handed to the witness, which applies it along the data)."""
+    fr = None
+    p_obs = aug
+    if aug.has_effect("dry_friction"):
+        fr = {k: aug[f"friction.{k}"] for k in ("coulomb", "static", "stribeck_velocity")}
+        p_obs = aug.without_effect("dry_friction")
+    return wit.in_units(wit.residuals(_observer_rates(prep, p_obs, jit), fr))
+
+
+def _no_finding_note(ranking: Sequence[Ranked]) -> list[str]:
+    """Why nothing was found: the best candidate and what it lacked."""
+    if not ranking:
+        return []
+    best = ranking[0]
+    return [f"no candidate is significant; the best, {best.name}, would remove "
+            f"{100 * best.gain:.0f} % of the short-horizon prediction error ({best.reason})"]

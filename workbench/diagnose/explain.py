@@ -17,7 +17,9 @@ Evidence for a candidate with k fitted values, from its refit (:mod:`.refit`):
 A candidate is *significant* when its dBIC exceeds :data:`DBIC_MIN` and it removes
 at least :data:`GAIN_MIN` of the mismatch. The winner is the significant candidate
 with the largest dBIC; further effects are added greedily while they stay
-significant on top of the ones found.
+significant on top of the ones found: :func:`screen` (every candidate, a short
+refit), :func:`refit_fully` (the :func:`promising` ones), :func:`choose` (the greedy
+choice of findings).
 """
 
 from __future__ import annotations
@@ -27,17 +29,20 @@ import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
 from ..params import PlantParams
 from .candidates import Candidate
 from .data import Prepared
+from .locate import consistency
 from .predict import Predictor
 from .refit import FitResult, fit_candidate
 
-__all__ = ["Ranked", "refit_all", "rank", "DBIC_MIN", "GAIN_MIN", "COST_ORDER"]
+__all__ = ["Ranked", "refit_all", "rank", "Refits", "Chosen", "screen", "promising",
+           "refit_fully", "choose", "DBIC_MIN", "GAIN_MIN", "COST_ORDER", "SCREEN_NFEV",
+           "FULL_REFITS", "MAX_EXTRA"]
 
 #: Smallest information-criterion improvement that counts as evidence.
 DBIC_MIN = 10.0
@@ -49,6 +54,12 @@ SEG_WORSE = -0.25
 #: Rough cost of refitting each candidate (for scheduling the slow ones first).
 COST_ORDER = {"line_dynamics": 6.0, "dry_friction": 4.0, "leakage": 3.0, "supply_droop": 3.0,
               "valve_dynamics": 3.0, "heat_transfer": 2.0}
+#: Least-squares iterations of the screening refit of every candidate.
+SCREEN_NFEV = 3
+#: Candidates refitted fully after the screening.
+FULL_REFITS = 4
+#: Further findings looked for after the first.
+MAX_EXTRA = 2
 
 _JOB: dict[str, Any] = {}
 
@@ -154,3 +165,123 @@ def rank(results: Sequence[FitResult], cost0: float, seg0: float | None, n_eff: 
         o.weight = math.exp(0.5 * (o.dbic - ref)) / z if np.isfinite(o.dbic) else 0.0
     out.sort(key=lambda o: (-o.significant, -o.dbic if np.isfinite(o.dbic) else math.inf))
     return out
+
+
+# ---------------------------------------------------------------------- choosing findings
+@dataclass(frozen=True)
+class Refits:
+    """Refits of candidates on one recording: the data, the nominal plant, the
+    predictors (objective ``shpe``, closed-loop check ``seg``), the operating-regime
+    masks and the worker processes are fixed."""
+
+    prep: Prepared
+    params: PlantParams
+    shpe: Predictor
+    seg: Predictor | None
+    masks: Mapping[str, np.ndarray]
+    workers: int | None
+    jit: bool
+
+    def __call__(self, cands: Sequence[Candidate], max_nfev: int,
+                 base: Mapping[str, Any] | None = None,
+                 starts: Mapping[str, Mapping[str, float]] | None = None) -> list[FitResult]:
+        """:func:`refit_all` of ``cands`` on top of ``base`` (dotted plant keys)."""
+        return refit_all(self.prep, self.params, cands, self.shpe, self.seg,
+                         workers=self.workers, max_nfev=max_nfev, jit=self.jit, base=base,
+                         starts=starts)
+
+    def rank(self, results: Sequence[FitResult], against: "Chosen") -> list[Ranked]:
+        """:func:`rank` of ``results`` against the model with ``against`` added."""
+        cons = {r.name: consistency(against.err - r.err, self.masks, r.name)
+                if r.err is not None else None for r in results}
+        return rank(results, against.cost, against.seg_cost, self.shpe.n_eff, cons)
+
+
+@dataclass
+class Chosen:
+    """Findings chosen so far (in order), the plant keys they add, and the
+    short-horizon cost (noise units), re-anchored closed-loop cost and per-sample
+    error left with them added."""
+
+    ranked: list[Ranked]
+    added: dict[str, Any]
+    cost: float
+    seg_cost: float | None
+    err: np.ndarray
+
+    @classmethod
+    def nothing(cls, cost: float, seg_cost: float | None, err: np.ndarray) -> "Chosen":
+        """No finding: the nominal model's costs and error."""
+        return cls([], {}, cost, seg_cost, err)
+
+    def add(self, r: Ranked) -> None:
+        """Add a finding; what is left is its refit's."""
+        self.ranked.append(r)
+        self.added.update(r.result.plant_values)
+        self.cost, self.seg_cost, self.err = r.result.cost, r.result.seg_cost, r.result.err
+
+
+def screen(refits: Refits, cands: Sequence[Candidate], nothing: Chosen) -> list[Ranked]:
+    """Every candidate: signature scan and a short refit (:data:`SCREEN_NFEV`
+    iterations), ranked against the nominal model."""
+    return refits.rank(refits(cands, SCREEN_NFEV), nothing)
+
+
+def promising(ranking: Sequence[Ranked]) -> list[Ranked]:
+    """The (at most :data:`FULL_REFITS`) best screened candidates with a positive dBIC."""
+    return [r for r in ranking if np.isfinite(r.dbic) and r.dbic > 0][:FULL_REFITS]
+
+
+def refit_fully(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked],
+                top: Sequence[Ranked], max_nfev: int, nothing: Chosen) -> list[Ranked]:
+    """The ``top`` candidates refitted fully from their screening values; a full refit
+    replaces the screening one when it succeeds and costs no more. All ranked again."""
+    by = {c.name: c for c in cands}
+    again = refits([by[r.name] for r in top], max_nfev,
+                   starts={r.name: r.result.values for r in top})
+    merged = {r.name: r.result for r in ranking}
+    for r_old, r_new in zip(top, again):
+        if r_new.error is None and r_new.cost <= r_old.result.cost:
+            r_new.grid = r_old.result.grid
+            r_new.nfev += r_old.result.nfev
+            r_new.wall_s += r_old.result.wall_s
+            merged[r_new.name] = r_new
+    return refits.rank([merged[c.name] for c in cands], nothing)
+
+
+def choose(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked],
+           max_nfev: int, nothing: Chosen, out_of_time: Callable[[], bool]) -> Chosen:
+    """The best significant candidate, then up to :data:`MAX_EXTRA` further ones, each
+    refitted on top of those found, while they stay significant there; no further
+    one when ``out_of_time()`` or when less than 3 % of the nominal mismatch is left."""
+    by_name = {c.name: c for c in cands}
+    chosen = Chosen.nothing(nothing.cost, nothing.seg_cost, nothing.err)
+    if not ranking or not ranking[0].significant:
+        return chosen
+    chosen.add(ranking[0])
+    for _ in range(MAX_EXTRA):
+        if out_of_time():
+            break
+        if (nothing.cost - chosen.cost) / nothing.cost > 0.97:
+            break                      # nothing left worth a further effect
+        others = _others(ranking, chosen)
+        if not others:
+            break
+        more = refits([by_name[r.name] for r in others], max_nfev, base=chosen.added,
+                      starts={r.name: r.result.values for r in others})
+        ranked = refits.rank(more, chosen)
+        if not ranked or not ranked[0].significant:
+            break
+        chosen.add(ranked[0])
+    return chosen
+
+
+def _others(ranking: Sequence[Ranked], chosen: Chosen) -> list[Ranked]:
+    """Up to three significant candidates that could add to ``chosen``: another effect,
+    or a nominal value that no finding has changed yet."""
+    used = {c.result.effect for c in chosen.ranked if c.result.effect != "parameter_error"}
+    used_names = {c.name for c in chosen.ranked}
+    return [r for r in ranking if r.significant and r.name not in used_names
+            and r.result.effect not in used
+            and not (r.result.effect == "parameter_error"
+                     and any(k in chosen.added for k in r.result.plant_values))][:3]

@@ -20,14 +20,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..params import PlantParams
 from ..plant import Plant
-from .candidates import Candidate
+from .candidates import Candidate, Free
 from .data import Prepared
 from .engine import Engine
 from .predict import Predictor
@@ -149,88 +149,121 @@ def fit_candidate(prep: Prepared, params: PlantParams, cand: Candidate, shpe: Pr
     """
     t0 = time.perf_counter()
     model = CandidateModel(prep, params, cand, start, jit=jit, base=base)
-    free = cand.free
-    lo = np.array([f.z_bounds[0] for f in free])
-    hi = np.array([f.z_bounds[1] for f in free])
-    nfev = 0
+    obj = _Objective(model, cand, shpe)
+    z0, grid = _start_point(obj, start)
+    z, J, message = _least_squares(obj, z0, max_nfev)
+    vals = cand.values(z)
+    Y = model.run(shpe, vals)
+    std, ci = _uncertainty(cand.free, vals, J, shpe.residuals(Y), shpe.n_eff)
+    seg_cost = seg.cost(model.run(seg, vals)) if seg is not None else None
+    return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values=vals, std=std, ci95=ci,
+                     cost=shpe.cost(Y), signal_costs=shpe.signal_costs(Y), seg_cost=seg_cost,
+                     grid=grid, fits=shpe.fits(Y), plant_values=cand.plant_values(vals),
+                     nfev=obj.nfev, wall_s=time.perf_counter() - t0, message=str(message),
+                     at_bound=_at_bound(cand.free, z, obj.lo, obj.hi),
+                     err=shpe.error_by_sample(Y).astype(np.float32))
 
-    def resid(z: np.ndarray) -> np.ndarray:
-        nonlocal nfev
-        nfev += 1
-        vals = cand.values(np.clip(z, lo, hi))
-        return shpe.residuals(model.run(shpe, vals))
 
-    # 1. signature scan
+class _Objective:
+    """The weighted short-horizon residuals of a candidate as a function of its values
+    in optimiser coordinates ``z`` (clipped to the bounds), cached per ``z``; counts the
+    replays (``nfev``).
+
+    Finite-difference steps (:meth:`jacobian`) of a few percent in ``z`` see through the
+    non-smooth parts of the model (stick-slip, deadband edges).
+    """
+
+    def __init__(self, model: CandidateModel, cand: Candidate, shpe: Predictor) -> None:
+        self.model, self.cand, self.shpe = model, cand, shpe
+        self.lo = np.array([f.z_bounds[0] for f in cand.free])
+        self.hi = np.array([f.z_bounds[1] for f in cand.free])
+        self.steps = np.array([0.03 if f.log else 0.05 for f in cand.free])
+        self.nfev = 0
+        self._cache: dict[bytes, np.ndarray] = {}
+
+    def cost(self, values: Mapping[str, float]) -> float:
+        """Short-horizon prediction cost at ``values`` (candidate keys; not cached)."""
+        self.nfev += 1
+        return self.shpe.cost(self.model.run(self.shpe, values))
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        z = np.asarray(z, dtype=float)
+        key = z.tobytes()
+        if key not in self._cache:
+            self.nfev += 1
+            vals = self.cand.values(np.clip(z, self.lo, self.hi))
+            self._cache[key] = self.shpe.residuals(self.model.run(self.shpe, vals))
+        return self._cache[key]
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray:
+        z = np.asarray(z, dtype=float)
+        return _fd_jacobian(self, z, self(z), self.steps, (self.lo, self.hi))
+
+
+def _start_point(obj: _Objective, start: Mapping[str, float] | None
+                 ) -> tuple[np.ndarray, list[tuple[dict[str, float], float]]]:
+    """Where the least squares starts (optimiser coordinates, just inside the bounds):
+    ``start`` when given, else the best point of the signature scan; and the scan
+    ((values, cost) per grid point; empty when ``start`` is given)."""
+    cand = obj.cand
     grid: list[tuple[dict[str, float], float]] = []
     if start is None:
         for point in cand.grid_points():
             vals = dict(cand.values(cand.z0()))
             vals.update(point)
-            Y = model.run(shpe, vals)
-            grid.append((vals, shpe.cost(Y)))
-            nfev += 1
+            grid.append((vals, obj.cost(vals)))
         best = min(grid, key=lambda g: g[1])[0] if grid else cand.values(cand.z0())
     else:
         best = {**cand.values(cand.z0()), **start}
-    z0 = np.clip(cand.z0(best), lo + 1e-9, hi - 1e-9)
-    # 2. least squares (finite differences: steps of a few percent see through
-    # the non-smooth parts -- stick-slip, deadband edges)
-    steps = np.array([0.03 if f.log else 0.05 for f in free])
-    cache: dict[bytes, np.ndarray] = {}
+    return np.clip(cand.z0(best), obj.lo + 1e-9, obj.hi - 1e-9), grid
 
-    def fun(z):
-        key = np.asarray(z, dtype=float).tobytes()
-        if key not in cache:
-            cache[key] = resid(np.asarray(z, dtype=float))
-        return cache[key]
 
-    def jac(z):
-        return _fd_jacobian(fun, np.asarray(z, dtype=float), fun(z), steps, (lo, hi))
-
-    message = ""
+def _least_squares(obj: _Objective, z0: np.ndarray, max_nfev: int
+                   ) -> tuple[np.ndarray, np.ndarray, str]:
+    """Bounded least squares (scipy ``trf``) from ``z0``: the solution, the Jacobian
+    there and the solver's message (``z0`` and its Jacobian when it fails)."""
     try:
-        sol = least_squares(fun, z0, jac=jac, bounds=(lo, hi), method="trf", x_scale=1.0,
-                            max_nfev=max_nfev, xtol=1e-4, ftol=1e-5, gtol=1e-8)
-        z = sol.x
-        message = sol.message
-        J = sol.jac
+        sol = least_squares(obj, z0, jac=obj.jacobian, bounds=(obj.lo, obj.hi), method="trf",
+                            x_scale=1.0, max_nfev=max_nfev, xtol=1e-4, ftol=1e-5, gtol=1e-8)
+        return sol.x, sol.jac, sol.message
     except (ValueError, np.linalg.LinAlgError) as exc:     # pragma: no cover - defensive
-        z = z0
-        J = jac(z)
-        message = f"least squares failed: {exc}"
-    vals = cand.values(z)
-    Y = model.run(shpe, vals)
-    cost = shpe.cost(Y)
-    # 3. uncertainty: Gauss-Newton covariance with the residual variance inflated by
-    # the correlation within a window (decimated residuals per window / 3)
-    r = shpe.residuals(Y)
+        return z0, obj.jacobian(z0), f"least squares failed: {exc}"
+
+
+def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
+                 r: np.ndarray, n_eff: float
+                 ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+    """Standard deviations and 95 % intervals of the fitted values (their units).
+
+    Gauss-Newton covariance ``pinv(J' J) s2`` in optimiser coordinates, the residual
+    variance ``s2`` inflated by the correlation of the residuals within a window
+    (``len(r) / n_eff``, at least 1), mapped back through each value's transform.
+    """
     m = len(r)
-    dof = max(m - len(z), 1)
+    dof = max(m - len(free), 1)
     s2 = float(r @ r) / dof
-    infl = max(m / shpe.n_eff, 1.0)
+    infl = max(m / n_eff, 1.0)
     std: dict[str, float] = {}
     ci: dict[str, tuple[float, float]] = {}
     try:
         cov = np.linalg.pinv(J.T @ J) * s2 * infl
-        for i, f in enumerate(free):
-            sz = math.sqrt(max(cov[i, i], 0.0))
-            v = vals[f.key]
-            if f.log:
-                std[f.key] = v * sz
-                ci[f.key] = (v * math.exp(-1.96 * sz), v * math.exp(1.96 * sz))
-            else:
-                std[f.key] = f.scale * sz
-                ci[f.key] = (v - 1.96 * f.scale * sz, v + 1.96 * f.scale * sz)
     except np.linalg.LinAlgError:                           # pragma: no cover
-        pass
-    at_bound = [f.key for f, zi, a, b in zip(free, z, lo, hi)
-                if (zi - a) < 1e-3 * (b - a) and not (f.low == 0.0 and not f.log)
-                or (b - zi) < 1e-3 * (b - a)]
-    seg_cost = None
-    if seg is not None:
-        seg_cost = seg.cost(model.run(seg, vals))
-    return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values=vals, std=std, ci95=ci,
-                     cost=cost, signal_costs=shpe.signal_costs(Y), seg_cost=seg_cost, grid=grid,
-                     fits=shpe.fits(Y), plant_values=cand.plant_values(vals), nfev=nfev,
-                     wall_s=time.perf_counter() - t0, message=str(message), at_bound=at_bound,
-                     err=shpe.error_by_sample(Y).astype(np.float32))
+        return std, ci
+    for i, f in enumerate(free):
+        sz = math.sqrt(max(cov[i, i], 0.0))
+        v = vals[f.key]
+        if f.log:
+            std[f.key] = v * sz
+            ci[f.key] = (v * math.exp(-1.96 * sz), v * math.exp(1.96 * sz))
+        else:
+            std[f.key] = f.scale * sz
+            ci[f.key] = (v - 1.96 * f.scale * sz, v + 1.96 * f.scale * sz)
+    return std, ci
+
+
+def _at_bound(free: Sequence[Free], z: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[str]:
+    """Keys whose fitted value lies within 0.1 % of its range from a bound (a lower bound
+    of zero on a linear scale -- no leak, no offset -- does not count)."""
+    return [f.key for f, zi, a, b in zip(free, z, lo, hi)
+            if (zi - a) < 1e-3 * (b - a) and not (f.low == 0.0 and not f.log)
+            or (b - zi) < 1e-3 * (b - a)]

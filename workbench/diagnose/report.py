@@ -22,20 +22,33 @@ def _ci_text(ci) -> str:
 
 def build_report(d) -> rp.Report:
     """The :class:`workbench.report.Report` of a :class:`~.core.Diagnosis`."""
-    from . import figures
+    sections = [_summary_section(d), _findings_section(d), _replay_section(d),
+                _signatures_section(d), _candidates_section(d)]
+    title = "Mismatch diagnosis"
+    return rp.Report(title, subtitle=f"{Path(d.recording_file).name} on {Path(d.plant_file).name}",
+                     status=_status(d), sections=sections,
+                     provenance=rp.provenance(plant_file=d.plant_file if Path(d.plant_file).exists()
+                                              else None,
+                                              command_line=" ".join(sys.argv),
+                                              extra=[("recording", d.recording_file)]))
+
+
+def _status(d) -> rp.Status:
+    """The report's verdict: what was found and how the fit changed, or no finding."""
+    if not d.findings:
+        return rp.Status("NOTE", "no significant mismatch: the nominal model explains the "
+                                 "recording within its noise (no finding)")
+    names = ", ".join(f.effect + (" (" + ", ".join(f.parameters) + ")"
+                                  if f.effect == "parameter_error" else "")
+                      for f in d.findings)
+    return rp.Status("PASS", f"found {names}; fit "
+                     + ", ".join(f"{k} {d.fit_before[k]:.1f} -> {d.fit_after[k]:.1f} %"
+                                 for k in d.fit_before))
+
+
+def _summary_section(d) -> rp.Section:
+    """The recording and replay in numbers, the fit before and after each finding, notes."""
     prep = d.prep
-    sections = []
-    # ---- summary
-    if d.findings:
-        names = ", ".join(f.effect + (" (" + ", ".join(f.parameters) + ")"
-                                      if f.effect == "parameter_error" else "")
-                          for f in d.findings)
-        status = rp.Status("PASS", f"found {names}; fit "
-                           + ", ".join(f"{k} {d.fit_before[k]:.1f} -> {d.fit_after[k]:.1f} %"
-                                       for k in d.fit_before))
-    else:
-        status = rp.Status("NOTE", "no significant mismatch: the nominal model explains the "
-                                   "recording within its noise (no finding)")
     kv = [("plant file", d.plant_file), ("recording", d.recording_file),
           ("samples", int(prep.n)), ("duration", float(prep.rec.duration), "s"),
           ("sample time", float(prep.dt) * 1e3, "ms"), ("replay", d.mode),
@@ -53,60 +66,71 @@ def build_report(d) -> rp.Report:
                                    "replay, per signal, before and after each finding"))
     for n in d.notes:
         blocks.append(rp.Status("NOTE", n))
-    sections.append(rp.Section("Summary", blocks))
+    return rp.Section("Summary", blocks)
 
-    # ---- findings
-    fb = []
-    if d.findings:
-        rows = []
-        for i, f in enumerate(d.findings, 1):
-            rows.append([i, f.effect, f.confidence,
-                         ", ".join(f"{k} = {rp.fmt(v)}" for k, v in f.parameters.items()),
-                         "; ".join(f"{a:.2f}-{b:.2f} s" for a, b in f.where[:6])
-                         + (" ..." if len(f.where) > 6 else "")])
-        fb.append(rp.Table(["#", "effect", "confidence", "parameters (SI)", "where"], rows,
-                           caption="Findings, most important first"))
-        for i, f in enumerate(d.findings, 1):
-            fb.append(rp.Heading(f"{i}. {f.effect}"))
-            fb.append(rp.Paragraph(f.evidence))
-            pol = d.polished.get(f.name)
-            if pol:
-                spans = "; ".join(f"{a:.2f}-{b:.2f} s" for a, b in pol["windows_s"])
-                fb.append(rp.Paragraph(
-                    f"Values refined by the grey-box estimator (multiple shooting, IPOPT) on "
-                    f"the windows {spans}, where this finding removes most of the mismatch "
-                    f"({pol['status']}, {pol['wall_s']:.1f} s); intervals from its covariance."))
-            prow = []
-            for k, v in f.plant_values.items():
-                if k == "lines.segments":
-                    continue
-                unit = next((kk.unit for e in EFFECTS.values() for kk in e if kk.path == k), "")
-                std = f.std.get(k)
-                prow.append([k, float(v), unit, None if std is None else float(std),
-                             _ci_text(f.ci95.get(k))])
-            fb.append(rp.Table(["plant key", "fitted", "unit", "std", "95 % interval"], prow,
-                               caption=f"Fitted values of finding {i} (plant.augmented.toml)"))
-    else:
-        fb.append(rp.Paragraph("No candidate removes a significant share of the mismatch: "
-                               "findings are empty and plant.augmented.toml equals the nominal "
-                               "plant."))
-    sections.append(rp.Section("Findings", fb))
 
-    # ---- replay figure
-    t = prep.t
+def _findings_section(d) -> rp.Section:
+    """The findings table, then per finding its evidence and fitted values."""
+    if not d.findings:
+        return rp.Section("Findings", [rp.Paragraph(
+            "No candidate removes a significant share of the mismatch: findings are empty and "
+            "plant.augmented.toml equals the nominal plant.")])
+    rows = []
+    for i, f in enumerate(d.findings, 1):
+        rows.append([i, f.effect, f.confidence,
+                     ", ".join(f"{k} = {rp.fmt(v)}" for k, v in f.parameters.items()),
+                     "; ".join(f"{a:.2f}-{b:.2f} s" for a, b in f.where[:6])
+                     + (" ..." if len(f.where) > 6 else "")])
+    fb = [rp.Table(["#", "effect", "confidence", "parameters (SI)", "where"], rows,
+                   caption="Findings, most important first")]
+    for i, f in enumerate(d.findings, 1):
+        fb += _finding_blocks(i, f, d.polished.get(f.name))
+    return rp.Section("Findings", fb)
+
+
+def _finding_blocks(i: int, f, pol: dict | None) -> list:
+    """Heading, evidence, how the values were polished, and the fitted-values table."""
+    fb = [rp.Heading(f"{i}. {f.effect}"), rp.Paragraph(f.evidence)]
+    if pol:
+        spans = "; ".join(f"{a:.2f}-{b:.2f} s" for a, b in pol["windows_s"])
+        fb.append(rp.Paragraph(
+            f"Values refined by the grey-box estimator (multiple shooting, IPOPT) on "
+            f"the windows {spans}, where this finding removes most of the mismatch "
+            f"({pol['status']}, {pol['wall_s']:.1f} s); intervals from its covariance."))
+    prow = []
+    for k, v in f.plant_values.items():
+        if k == "lines.segments":
+            continue
+        unit = next((kk.unit for e in EFFECTS.values() for kk in e if kk.path == k), "")
+        std = f.std.get(k)
+        prow.append([k, float(v), unit, None if std is None else float(std),
+                     _ci_text(f.ci95.get(k))])
+    fb.append(rp.Table(["plant key", "fitted", "unit", "std", "95 % interval"], prow,
+                       caption=f"Fitted values of finding {i} (plant.augmented.toml)"))
+    return fb
+
+
+def _replay_section(d) -> rp.Section:
+    """Recording, nominal and augmented replays, with the located intervals."""
+    from . import figures
+    prep = d.prep
     meas = {s: prep.measured(s) for s in prep.signals}
     meas["u"] = np.asarray(prep.rec["u"])
     spans = d.findings[0].where if d.findings else []
     ref = np.asarray(prep.rec["r"]) if "r" in prep.rec else None
-    fig = figures.replay_figure(t, meas, d.replay_nominal, d.replay_augmented, d.located, spans,
-                                reference=ref, title="recording vs nominal vs augmented model")
-    sections.append(rp.Section("Recording and models", [
+    fig = figures.replay_figure(prep.t, meas, d.replay_nominal, d.replay_augmented, d.located,
+                                spans, reference=ref,
+                                title="recording vs nominal vs augmented model")
+    return rp.Section("Recording and models", [
         rp.Paragraph(f"Replay: {d.mode}. Grey: intervals where the nominal model's short-horizon "
                      "predictions miss the recording; orange: where the first finding removes "
                      "the mismatch."),
-        rp.Figure(fig, caption="Recording, nominal model and augmented model")]))
+        rp.Figure(fig, caption="Recording, nominal model and augmented model")])
 
-    # ---- signatures
+
+def _signatures_section(d) -> rp.Section:
+    """Witnesses and prediction error, nominal vs augmented; the mismatch per regime."""
+    from . import figures
     sb = [rp.Paragraph(
         "Flow witnesses: mass flow each chamber received (chamber equation with the measured "
         "pressure, position and velocity) minus what the valve law gives at the recorded "
@@ -114,8 +138,8 @@ def build_report(d) -> rp.Report:
         "unexplained (m a - forces). Prediction error: squared residual of the short-horizon "
         "predictions in units of the measurement noise.")]
     if d.err_nominal is not None:
-        fig = figures.signature_figure(t, d.witness, d.witness_after, d.err_nominal, d.err_after,
-                                       d.located, title="residual signatures")
+        fig = figures.signature_figure(d.prep.t, d.witness, d.witness_after, d.err_nominal,
+                                       d.err_after, d.located, title="residual signatures")
         sb.append(rp.Figure(fig, caption="Residual signatures, nominal vs augmented"))
     fig = figures.regime_figure(d.regime_share, title="where the nominal mismatch lives")
     sb.append(rp.Figure(fig, caption="Share of the nominal mismatch per operating regime",
@@ -127,9 +151,12 @@ def build_report(d) -> rp.Report:
     if d.located:
         sb.append(rp.Paragraph("Located intervals: " + "; ".join(
             f"{a:.2f}-{b:.2f} s" for a, b in d.located)))
-    sections.append(rp.Section("Residual signatures and location", sb))
+    return rp.Section("Residual signatures and location", sb)
 
-    # ---- candidates
+
+def _candidates_section(d) -> rp.Section:
+    """Every candidate's evidence (table and bar chart), best first."""
+    from . import figures
     rows = []
     for r in d.ranking:
         vals = ", ".join(f"{k.split('.', 1)[-1]} = {rp.fmt(v, digits=3)}"
@@ -153,14 +180,7 @@ def build_report(d) -> rp.Report:
                                  [r.significant for r in d.ranking],
                                  title="candidate ranking")
     cb.append(rp.Figure(fig, caption="Share of the mismatch removed by each candidate", width=0.8))
-    sections.append(rp.Section("Candidates", cb))
-    title = "Mismatch diagnosis"
-    return rp.Report(title, subtitle=f"{Path(d.recording_file).name} on {Path(d.plant_file).name}",
-                     status=status, sections=sections,
-                     provenance=rp.provenance(plant_file=d.plant_file if Path(d.plant_file).exists()
-                                              else None,
-                                              command_line=" ".join(sys.argv),
-                                              extra=[("recording", d.recording_file)]))
+    return rp.Section("Candidates", cb)
 
 
 def write_report(d, out_dir) -> tuple[Path, Path]:
