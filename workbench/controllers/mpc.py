@@ -961,7 +961,7 @@ def bench_reference(plant, duration: float = 20.0):
     Its holds are shortened so that the whole profile (steps of 125, 250 and 10 mm
     both ways, ramps at 0.1 m/s) lasts ``duration``.
     """
-    from ..validate import validation_profile
+    from ..references import validation_profile
     L = plant.stroke
     fixed = 0.5 + (0.9 * L - 0.25 * L) / (0.2 * L) + (0.8 * L) / (0.2 * L)   # start hold + ramps
     hold = (duration - fixed) / 6.0
