@@ -563,8 +563,20 @@ def validate(plant, controller=None, spec: Specification | None = None,
         return simulate.closed_loop(plant, proxy, reference, t_end=n * T, x0=x0,
                                     output_times=out_t, progress=progress)
 
-    error = None
     t0 = _time.perf_counter()
+    traj, error = _run_keeping_failures(run, duration, controller, T)
+    wall = _time.perf_counter() - t0
+    traj, error = _finite_part(traj, duration, error)
+    return evaluate(traj, reference, spec, plant, error=error, wall_time=wall, label=label)
+
+
+def _run_keeping_failures(run: Callable, duration: float, controller,
+                          T: float) -> tuple[Trajectory, str | None]:
+    """Simulate to ``duration`` (s); if the solver gives up, the part up to the failure.
+
+    Returns the trajectory and the solver's message (None when it ran through).
+    """
+    error = None
     proxy = _Counting(controller)
     try:
         traj = run(duration, proxy)
@@ -585,11 +597,15 @@ def validate(plant, controller=None, spec: Specification | None = None,
                 traj = run(0.0, _Counting(controller))
             except WorkbenchError as exc0:
                 raise WorkbenchError(f"the simulation cannot even start: {exc0}") from None
-    wall = _time.perf_counter() - t0
+    return traj, error
+
+
+def _finite_part(traj: Trajectory, duration: float,
+                 error: str | None) -> tuple[Trajectory, str | None]:
+    """The trajectory cut at the reference's end (s) and before any non-finite sample."""
     beyond = np.flatnonzero(traj.time > duration + 1e-9)
     if len(beyond):                              # the last period ran past the reference's end
         traj = _truncate(traj, int(beyond[0]))
-
     sig = np.column_stack([traj["x"], traj["u"], traj["p_a"], traj["p_b"]])
     bad = np.flatnonzero(~np.all(np.isfinite(sig), axis=1))
     if len(bad):
@@ -597,4 +613,4 @@ def validate(plant, controller=None, spec: Specification | None = None,
         if error is None:
             error = f"the simulation produced non-finite values at t = {traj.time[k]:.3f} s"
         traj = _truncate(traj, max(k, 1))
-    return evaluate(traj, reference, spec, plant, error=error, wall_time=wall, label=label)
+    return traj, error

@@ -136,6 +136,23 @@ def _controller_phase(u: np.ndarray, ratio: int) -> tuple[int, float]:
     return ph, float(counts[ph] / counts.sum())
 
 
+def _plant_controller(plant: Plant, rec: Recording, dt: float,
+                      notes: list[str]) -> tuple[Any, int, int]:
+    """The plant file's controller (None without one, or when its period is not a
+    multiple of the sample time ``dt``, s), samples per period, phase of its updates."""
+    if not plant.params.has_controller:
+        return None, 1, 0
+    from ..controllers import from_plant
+    controller = from_plant(plant)
+    ratio = int(round(controller.sample_time / dt))
+    if ratio < 1 or abs(ratio * dt - controller.sample_time) > 0.02 * dt:
+        notes.append(f"the controller period ({controller.sample_time:g} s) is not a "
+                     f"multiple of the sample time ({dt:g} s): open-loop replay")
+        return None, 1, 0
+    phase, _share = _controller_phase(np.asarray(rec["u"]), ratio)
+    return controller, ratio, phase
+
+
 def _smoothed(rec: Recording, x: np.ndarray, dt: float, win_x: int, win_p: int,
               has_p: bool) -> dict[str, Any]:
     """Smoothed signals, their derivatives and the noise floors (Prepared's fields).
@@ -220,19 +237,8 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
                      "cannot be told apart from position alone")
     has_r = "r" in rec
     has_ctrl = plant.params.has_controller
-    controller = None
-    ratio, phase = 1, 0
+    controller, ratio, phase = _plant_controller(plant, rec, dt, notes)
     closed = False
-    if has_ctrl:
-        from ..controllers import from_plant
-        controller = from_plant(plant)
-        ratio = int(round(controller.sample_time / dt))
-        if ratio < 1 or abs(ratio * dt - controller.sample_time) > 0.02 * dt:
-            notes.append(f"the controller period ({controller.sample_time:g} s) is not a "
-                         f"multiple of the sample time ({dt:g} s): open-loop replay")
-            ratio, controller = 1, None
-        else:
-            phase, share = _controller_phase(np.asarray(rec["u"]), ratio)
     if mode == "closed":
         if not has_r:
             raise InputError("closed-loop replay needs an 'r' column", source=src)
