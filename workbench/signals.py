@@ -11,7 +11,8 @@ Savitzky-Golay smoother, ``1.4826 MAD(y - S y) / sqrt(1 - h0)`` (``h0`` the cent
 weight of the smoother, so the normalisation is exact for white noise), raised to the
 quantisation error ``q / sqrt(12)`` when the samples lie on a grid of step ``q``.
 
-It replaced the third-difference estimator of the grey-box fit
+It is the diagnosis's former estimator (with the quantisation step now detected
+exactly, see below) and replaced the third-difference estimator of the grey-box fit
 (``1.4826 MAD(diff(y, 3)) / sqrt(20)``). Both are unbiased on white noise added to a
 smooth signal (200 seeded runs of 5000 samples, sine, sparse steps and first-order
 responses: mean ratio to the true sigma 0.998 to 1.013 for both, spread 2 %). They
@@ -26,7 +27,10 @@ differ where it matters:
   ``sqrt(sigma^2 + q^2/12)`` for sigma/q from 0.05 to 0.5, against 0.79 to 1.02 here.
   The grid is detected exactly (every nonzero step of the signal an integer multiple
   of the smallest, to 1e-3), not from the smallest steps alone, which on a noise-free
-  smooth signal mistook the slow steps near a turning point for an LSB.
+  smooth signal mistook the slow steps near a turning point for an LSB. On the
+  grey-box test's closed-loop recording (noise plus 12-bit readings) it gives 35.2 um
+  on x and 211 Pa on the pressures for a true error of 36.6 um and 212 Pa; the third
+  difference gave 40.5 um and 243 Pa.
 * *Steps*: a step spoils 6 residuals of the 7-point smoother against 3 third
   differences; with a step every 100 samples the estimate is 5 % high (3 % for the
   third difference), every 400 samples 1 %. Drive signals have far fewer steps.
@@ -63,8 +67,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "noise_floor", "quantisation_step", "savgol", "smooth", "derivative", "odd_window",
-    "fit", "fit_signals", "CONFIDENCE_Z99", "WHITENESS_LEVEL", "correlation_band", "autocorrelation",
-    "cross_correlation", "ljung_box", "independence_test", "fraction_outside",
+    "fit", "fit_signals", "CONFIDENCE_Z99", "WHITENESS_LEVEL", "correlation_band",
+    "autocorrelation", "cross_correlation", "ljung_box", "independence_test", "fraction_outside",
 ]
 
 #: Two-sided 99 % quantile of the standard normal distribution: the confidence band

@@ -118,7 +118,7 @@ from ..errors import InputError, WorkbenchError
 from ..params import EFFECTS, SCHEMA
 from ..plant import Plant
 from ..recording import Recording, fit as nrmse_fit, load_recording
-from ..signals import derivative, noise_floor, odd_window
+from ..signals import autocorrelation, derivative, fraction_outside, noise_floor, odd_window
 
 __all__ = ["estimate", "GreyBoxResult", "SIGNALS", "RADAU_TABLES", "noise_std",
            "synthetic_recording", "add_cli", "bench"]
@@ -1256,13 +1256,11 @@ def _use_closed_loop(replay: str, rec: Recording, plant: Plant) -> bool:
 
 def _whiteness(e: np.ndarray, lags: int = 25) -> float:
     """Fraction of autocorrelation lags 1..lags outside the 99 % band +-2.58/sqrt(N)."""
-    e = np.asarray(e, dtype=float) - np.mean(e)
     n = len(e)
-    den = float(np.dot(e, e))
-    if n < 4 * lags or den == 0.0:
+    r = autocorrelation(e, lags) if n >= 4 * lags else np.full(lags + 1, np.nan)
+    if not np.isfinite(r[0]):
         return float("nan")
-    acf = np.array([float((e[:-k] * e[k:]).sum()) / den for k in range(1, lags + 1)])
-    return float(np.mean(np.abs(acf) > 2.58 / math.sqrt(n)))
+    return fraction_outside(r[1:], n, band=2.58 / math.sqrt(n))
 
 
 def _fits(rec_y: Mapping[str, np.ndarray], run) -> dict[str, float]:
