@@ -388,7 +388,7 @@ def test_other_separators(tmp_path):
 
 
 def test_fast_and_slow_parsers_agree(tmp_path):
-    from workbench import recording as module
+    from workbench import recording_io as module
 
     rec = sample_recording(n=300)
     path = rec.to_csv(tmp_path / "r.csv")

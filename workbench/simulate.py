@@ -111,38 +111,8 @@ class Trajectory:
 
 
 # ---------------------------------------------------------------------- references
-@dataclass(frozen=True)
-class Reference:
-    """A position reference r(t) (m): piecewise linear through (times, values)."""
-
-    times: np.ndarray
-    values: np.ndarray
-    hold: bool = False
-
-    def __call__(self, t: float | np.ndarray) -> np.ndarray:
-        if self.hold:
-            idx = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 1)
-            return self.values[idx]
-        return np.interp(t, self.times, self.values)
-
-    @property
-    def duration(self) -> float:
-        return float(self.times[-1])
-
-
-def steps(levels: Sequence[float], hold: float, t0: float = 0.0) -> Reference:
-    """Step reference: each level held for ``hold`` seconds, the first from ``t0``."""
-    levels = np.asarray(levels, dtype=float)
-    times = t0 + hold * np.arange(len(levels) + 1)
-    return Reference(times=times, values=np.append(levels, levels[-1]), hold=True)
-
-
-def profile(points: Sequence[tuple[float, float]]) -> Reference:
-    """Piecewise-linear reference through (time s, position m) points (ramps and holds)."""
-    pts = np.asarray(points, dtype=float)
-    if pts.ndim != 2 or pts.shape[1] != 2 or np.any(np.diff(pts[:, 0]) < 0):
-        raise InputError("a profile is a list of (time, position) with time not decreasing")
-    return Reference(times=pts[:, 0], values=pts[:, 1], hold=False)
+# Defined in workbench.references; re-exported here (simulate.steps, simulate.Reference).
+from .references import Reference, profile, steps  # noqa: E402
 
 
 # ---------------------------------------------------------------------- simulator

@@ -31,15 +31,15 @@ import numpy as np
 
 from . import simulate
 from .errors import InputError, WorkbenchError
-from .simulate import Reference, Trajectory
+from .metrics import Segment, SegmentMetrics, find_segments, segment_metrics, trapezoid
+from .references import Reference, validation_profile
+from .simulate import Trajectory
 
 __all__ = [
     "Specification", "Segment", "SegmentMetrics", "Check", "Metrics", "Validation",
     "validation_profile", "find_segments", "segment_metrics", "evaluate", "validate",
 ]
 
-#: Two reference values closer than this (m) are the same level.
-_LEVEL_TOL = 1e-12
 
 
 # ---------------------------------------------------------------------- specification
@@ -144,315 +144,6 @@ class Specification:
 
     def as_dict(self) -> dict[str, float]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
-
-
-# ---------------------------------------------------------------------- profile
-def validation_profile(plant, large_step: float | None = None, small_step: float | None = None,
-                       hold: float = 2.5, ramp_speed: float | None = None,
-                       margin: float = 0.1, start_hold: float = 0.5) -> Reference:
-    """The standard validation reference for a plant (piecewise linear, m).
-
-    Starting at rest at mid-stroke ``c = L/2`` (``L`` the stroke):
-
-    1. hold ``start_hold`` at ``c``;
-    2. large step up to ``c + a``, hold; large step down (size ``2 a``) to ``c - a``, hold;
-    3. small step up to ``c - a + s``, hold; small step down to ``c - a``, hold;
-    4. ramp up at ``ramp_speed`` to ``(1 - margin) L``, hold;
-       ramp down to ``margin L``, hold.
-
-    Every level stays within [margin L, (1 - margin) L]. With the defaults on a
-    0.5 m stroke: steps of 125, 250 and 10 mm, ramps at 0.1 m/s, 22.75 s in all.
-
-    Parameters
-    ----------
-    plant : Plant or float
-        The plant (its stroke is used) or the stroke itself, m.
-    large_step : float, m
-        ``a``; default a quarter of the stroke.
-    small_step : float, m
-        ``s``; default 2 % of the stroke (10 mm on 0.5 m).
-    hold : float, s
-        Hold after every step and ramp. Default 2.5 s (settling time limit 1.5 s plus
-        the steady-state window 0.5 s, with room to spare).
-    ramp_speed : float, m/s
-        Default 0.2 stroke per second.
-    margin : float, -
-        Fraction of the stroke kept free at each end. Default 0.1.
-    start_hold : float, s
-        Initial hold at mid-stroke. Default 0.5 s.
-
-    Returns
-    -------
-    Reference
-        A :func:`workbench.simulate.profile`.
-    """
-    L = float(plant.stroke) if hasattr(plant, "stroke") else float(plant)
-    if not (math.isfinite(L) and L > 0):
-        raise InputError(f"stroke must be a positive length in m, got {L!r}")
-    if not 0.0 <= margin < 0.5:
-        raise InputError(f"margin is a fraction of the stroke in [0, 0.5), got {margin!r}")
-    lo, hi, c = margin * L, (1.0 - margin) * L, 0.5 * L
-    a = 0.25 * L if large_step is None else float(large_step)
-    s = 0.02 * L if small_step is None else float(small_step)
-    v = 0.2 * L if ramp_speed is None else float(ramp_speed)
-    room = c - lo
-    if not 0.0 < a <= room + 1e-12:
-        raise InputError(f"large_step must be in (0, {room:g}] m so that mid-stroke +- the step "
-                         f"stays within {margin:.0%}..{1 - margin:.0%} of the {L:g} m stroke; "
-                         f"got {a!r} m")
-    if not 0.0 < s <= 2.0 * a:
-        raise InputError(f"small_step must be in (0, {2 * a:g}] m, got {s!r} m")
-    if not (math.isfinite(hold) and hold > 0):
-        raise InputError(f"hold must be > 0 s, got {hold!r}")
-    if not (math.isfinite(start_hold) and start_hold >= 0):
-        raise InputError(f"start_hold must be >= 0 s, got {start_hold!r}")
-    if not (math.isfinite(v) and v > 0):
-        raise InputError(f"ramp_speed must be > 0 m/s, got {v!r}")
-
-    pts: list[tuple[float, float]] = [(0.0, c)]
-    t = start_hold
-    if start_hold > 0:
-        pts.append((t, c))
-    for level in (c + a, c - a, c - a + s, c - a):
-        pts.append((t, level))
-        t += hold
-        pts.append((t, level))
-    for target in (hi, lo):
-        t += abs(target - pts[-1][1]) / v
-        pts.append((t, target))
-        t += hold
-        pts.append((t, target))
-    return simulate.profile(pts)
-
-
-# ---------------------------------------------------------------------- segments
-@dataclass(frozen=True)
-class Segment:
-    """A piece of the reference.
-
-    Attributes
-    ----------
-    kind : {"step", "ramp", "hold"}
-        ``step``: the reference jumps at ``start`` from ``r_start`` to ``r_end`` and is
-        held until ``end``; ``ramp``: it moves linearly from ``r_start`` to ``r_end``;
-        ``hold``: it stays at ``r_start == r_end`` (not entered by a jump).
-    start, end : s.
-    r_start, r_end : m.
-    """
-
-    kind: str
-    start: float
-    end: float
-    r_start: float
-    r_end: float
-
-    @property
-    def size(self) -> float:
-        """Change of the reference over the segment, m."""
-        return self.r_end - self.r_start
-
-    @property
-    def duration(self) -> float:
-        return self.end - self.start
-
-    def describe(self) -> str:
-        """E.g. ``step at 0.50 s, 250.0 -> 375.0 mm``."""
-        if self.kind == "hold":
-            return f"hold {self.start:.2f}-{self.end:.2f} s at {self.r_end * 1e3:.1f} mm"
-        what = "step at" if self.kind == "step" else "ramp"
-        when = f"{self.start:.2f} s" if self.kind == "step" else f"{self.start:.2f}-{self.end:.2f} s"
-        return f"{what} {when}, {self.r_start * 1e3:.1f} -> {self.r_end * 1e3:.1f} mm"
-
-
-def find_segments(reference: Reference) -> tuple[Segment, ...]:
-    """Steps, ramps and holds of a reference, from its break points alone.
-
-    A jump straight into a ramp is not a step (it has no hold to settle in); the
-    ramp's tracking error covers it. Consecutive constant pieces at one level merge.
-
-    Parameters
-    ----------
-    reference : Reference
-        From :func:`workbench.simulate.steps` or :func:`workbench.simulate.profile`.
-    """
-    if not isinstance(reference, Reference):
-        raise InputError("validation needs a workbench.simulate.Reference (from simulate.steps "
-                         f"or simulate.profile) to find its steps and ramps, got {type(reference).__name__}")
-    t = np.asarray(reference.times, dtype=float)
-    r = np.asarray(reference.values, dtype=float)
-    if t.ndim != 1 or t.shape != r.shape or len(t) < 2:
-        raise InputError("a reference needs at least two (time, value) points")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(r))):
-        raise InputError("the reference has non-finite times or values")
-    if np.any(np.diff(t) < 0):
-        raise InputError("reference times must not decrease")
-    segs: list[Segment] = []
-
-    def constant(t0: float, t1: float, level: float, jump_from: float | None) -> None:
-        if jump_from is not None and abs(level - jump_from) > _LEVEL_TOL:
-            segs.append(Segment("step", t0, t1, jump_from, level))
-            return
-        last = segs[-1] if segs else None
-        if (last is not None and last.kind != "ramp" and abs(last.end - t0) <= 1e-12
-                and abs(last.r_end - level) <= _LEVEL_TOL):
-            segs[-1] = replace(last, end=t1)
-        else:
-            segs.append(Segment("hold", t0, t1, level, level))
-
-    if t[0] > 0:
-        constant(0.0, float(t[0]), float(r[0]), None)
-    if reference.hold:
-        prev = None
-        for i in range(len(t) - 1):
-            if t[i + 1] <= t[i]:
-                continue
-            constant(float(t[i]), float(t[i + 1]), float(r[i]), prev)
-            prev = float(r[i])
-        return tuple(segs)
-
-    jump_from: float | None = None
-    for i in range(len(t) - 1):
-        dt, dr = t[i + 1] - t[i], r[i + 1] - r[i]
-        if dt <= 0:
-            if abs(dr) > _LEVEL_TOL and jump_from is None:
-                jump_from = float(r[i])
-            continue
-        if abs(dr) <= _LEVEL_TOL:
-            constant(float(t[i]), float(t[i + 1]), float(r[i]), jump_from)
-        else:
-            segs.append(Segment("ramp", float(t[i]), float(t[i + 1]), float(r[i]), float(r[i + 1])))
-        jump_from = None
-    return tuple(segs)
-
-
-# ---------------------------------------------------------------------- metrics
-@dataclass(frozen=True)
-class SegmentMetrics:
-    """How the position followed one segment.
-
-    Attributes
-    ----------
-    segment : Segment
-    overshoot : %, of the step size (steps; NaN otherwise).
-    overshoot_abs : m, the same as a length.
-    settling_time : s after the step until |x - r| stays within ``band``; ``inf`` if it
-        is outside the band at any time in the steady-state window at the end of the
-        hold (it must have settled before the steady-state error is measured).
-    rise_time : s from 10 % to 90 % of the step; ``inf`` if 90 % is never reached.
-    band : m, settling band half-width used.
-    steady_state_error : m, mean |r - x| over the end of the hold (steps, holds).
-    tracking_error : m, max |r - x| over the segment.
-    iae : m s, integral of |r - x| over the segment.
-    complete : the trajectory covers the whole segment.
-    """
-
-    segment: Segment
-    overshoot: float = math.nan
-    overshoot_abs: float = math.nan
-    settling_time: float = math.nan
-    rise_time: float = math.nan
-    band: float = math.nan
-    steady_state_error: float = math.nan
-    tracking_error: float = math.nan
-    iae: float = math.nan
-    complete: bool = True
-
-    def as_dict(self) -> dict[str, Any]:
-        s = self.segment
-        return {"kind": s.kind, "start": s.start, "end": s.end, "r_start": s.r_start,
-                "r_end": s.r_end, "overshoot": self.overshoot, "overshoot_abs": self.overshoot_abs,
-                "settling_time": self.settling_time, "rise_time": self.rise_time,
-                "band": self.band, "steady_state_error": self.steady_state_error,
-                "tracking_error": self.tracking_error, "iae": self.iae, "complete": self.complete}
-
-
-def _trapz(y: np.ndarray, t: np.ndarray) -> float:
-    if len(t) < 2:
-        return 0.0
-    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
-
-
-def _first_crossing(t: np.ndarray, y: np.ndarray, level: float) -> float:
-    """First time (linear interpolation) at which ``y`` reaches ``level`` from below."""
-    above = np.flatnonzero(y >= level)
-    if len(above) == 0:
-        return math.inf
-    k = int(above[0])
-    if k == 0:
-        return float(t[0])
-    y0, y1 = y[k - 1], y[k]
-    return float(t[k - 1] + (level - y0) / (y1 - y0) * (t[k] - t[k - 1]))
-
-
-def _settling(t: np.ndarray, err: np.ndarray, band: float, t_step: float,
-              dwell: float = 0.0) -> float:
-    """Time after ``t_step`` from which |err| <= band to the end (interpolated).
-
-    ``inf`` if the response is outside the band during the last ``dwell`` seconds
-    (a ringing response that happens to be inside at the last sample has not settled).
-    """
-    out = np.flatnonzero(np.abs(err) > band)
-    if len(out) == 0:
-        return 0.0
-    k = int(out[-1])
-    if k == len(t) - 1 or t[k] >= t[-1] - dwell:
-        return math.inf
-    a, b = abs(err[k]), abs(err[k + 1])
-    frac = (a - band) / (a - b) if a != b else 1.0
-    return float(t[k] + frac * (t[k + 1] - t[k]) - t_step)
-
-
-def segment_metrics(time: np.ndarray, x: np.ndarray, reference: Reference,
-                    segments: Sequence[Segment], spec: Specification) -> tuple[SegmentMetrics, ...]:
-    """Metrics of every segment from a sampled position.
-
-    Parameters
-    ----------
-    time : (N,) s, increasing. x : (N,) position, m.
-    reference : Reference, m (evaluated at ``time``; the step levels come from the segments).
-    segments : from :func:`find_segments`. spec : Specification (band, window).
-    """
-    time = np.asarray(time, dtype=float)
-    x = np.asarray(x, dtype=float)
-    t_last = float(time[-1]) if len(time) else -math.inf
-    out = []
-    for seg in segments:
-        sel = (time >= seg.start - 1e-9) & (time <= seg.end + 1e-9)
-        tt, xx = time[sel], x[sel]
-        complete = t_last >= seg.end - 1e-9
-        if len(tt) < 2 or seg.duration <= 0:
-            out.append(SegmentMetrics(seg, complete=complete and len(tt) >= 2))
-            continue
-        if seg.kind == "ramp":
-            rr = np.asarray(reference(tt), dtype=float)
-        else:
-            rr = np.full_like(tt, seg.r_end)
-        e = np.abs(rr - xx)
-        kw: dict[str, Any] = {"tracking_error": float(np.max(e)), "iae": _trapz(e, tt),
-                              "complete": complete}
-        w = min(spec.steady_state_window, 0.5 * seg.duration)
-        if seg.kind in ("step", "hold"):
-            if complete:
-                win = tt >= seg.end - w - 1e-9
-            else:
-                win = tt >= tt[-1] - w - 1e-9
-            ew, tw = e[win], tt[win]
-            kw["steady_state_error"] = (_trapz(ew, tw) / (tw[-1] - tw[0])
-                                        if len(tw) > 1 and tw[-1] > tw[0] else float(np.mean(ew)))
-        if seg.kind == "step":
-            size = seg.size
-            sgn = math.copysign(1.0, size)
-            band = spec.band(size)
-            peak = float(np.max(sgn * (xx - seg.r_end)))
-            over = max(peak, 0.0)
-            progress = sgn * (xx - seg.r_start) / abs(size)
-            t10 = _first_crossing(tt, progress, 0.1)
-            t90 = _first_crossing(tt, progress, 0.9)
-            kw.update(overshoot=100.0 * over / abs(size), overshoot_abs=over, band=band,
-                      settling_time=_settling(tt, xx - seg.r_end, band, seg.start, w),
-                      rise_time=(t90 - t10) if math.isfinite(t90) else math.inf)
-        out.append(SegmentMetrics(seg, **kw))
-    return tuple(out)
 
 
 # ---------------------------------------------------------------------- checks and results
@@ -659,9 +350,23 @@ def evaluate(trajectory: Trajectory, reference: Reference, spec: Specification, 
     t_end = float(t[-1])
     completed = error is None and t_end >= duration - 1e-6
 
-    # whole run
+    metrics = _run_metrics(t, x, u, p_a, p_b, reference, seg_m, (u_min, u_max))
+    checks = [_simulation_check(completed, error, t_end, duration)]
+    checks += _segment_checks(seg_m, spec, metrics.ramp_error_max)
+    checks += _limit_checks(t, p_a, p_b, metrics, spec, (u_min, u_max), (p_atm, p_sup))
+    return Validation(trajectory=trajectory, reference=reference, spec=spec, segments=seg_m,
+                      checks=tuple(checks), metrics=metrics, command_range=(u_min, u_max),
+                      pressure_range=(p_atm, p_sup), error=None if completed else (error or
+                      "trajectory ends before the reference"), wall_time=wall_time, label=label)
+
+
+def _run_metrics(t: np.ndarray, x: np.ndarray, u: np.ndarray, p_a: np.ndarray,
+                 p_b: np.ndarray, reference: Reference, seg_m: Sequence[SegmentMetrics],
+                 u_range: tuple[float, float]) -> Metrics:
+    """Whole-run metrics: IAE (m s), share of time at a command limit, pressure range (Pa)."""
+    u_min, u_max = u_range
     r_all = np.asarray(reference(t), dtype=float)
-    iae = _trapz(np.abs(r_all - x), t)
+    iae = trapezoid(np.abs(r_all - x), t)
     tol_u = 1e-9 * max(1.0, u_max - u_min)
     sat = (u <= u_min + tol_u) | (u >= u_max - tol_u)
     if len(t) > 1:
@@ -670,22 +375,29 @@ def evaluate(trajectory: Trajectory, reference: Reference, spec: Specification, 
     else:
         sat_frac = float(sat[0])
     p_all = np.concatenate((p_a, p_b))
-    p_min, p_max = float(np.min(p_all)), float(np.max(p_all))
     ramps = [m for m in seg_m if m.segment.kind == "ramp"]
     ramp_max = max((m.tracking_error for m in ramps if not math.isnan(m.tracking_error)),
                    default=math.nan)
-    metrics = Metrics(iae=iae, saturation_fraction=sat_frac, p_min=p_min, p_max=p_max,
-                      ramp_error_max=ramp_max, simulated_time=t_end, duration=duration)
+    return Metrics(iae=iae, saturation_fraction=sat_frac, p_min=float(np.min(p_all)),
+                   p_max=float(np.max(p_all)), ramp_error_max=ramp_max,
+                   simulated_time=float(t[-1]), duration=reference.duration)
 
-    checks: list[Check] = []
+
+def _simulation_check(completed: bool, error: str | None, t_end: float,
+                      duration: float) -> Check:
     if completed:
-        checks.append(Check("simulation", duration, duration, "s", True,
-                            f"ran the whole {duration:g} s profile"))
-    else:
-        why = error or "the trajectory ends before the reference"
-        checks.append(Check("simulation", t_end, duration, "s", False,
-                             f"stopped at t = {t_end:.3f} s of {duration:g} s: {why}"))
+        return Check("simulation", duration, duration, "s", True,
+                     f"ran the whole {duration:g} s profile")
+    why = error or "the trajectory ends before the reference"
+    return Check("simulation", t_end, duration, "s", False,
+                 f"stopped at t = {t_end:.3f} s of {duration:g} s: {why}")
 
+
+def _segment_checks(seg_m: Sequence[SegmentMetrics], spec: Specification,
+                    ramp_max: float) -> list[Check]:
+    """Overshoot, settling time, steady-state and ramp tracking error of the worst segment."""
+    checks: list[Check] = []
+    ramps = [m for m in seg_m if m.segment.kind == "ramp"]
     steps = [m for m in seg_m if m.segment.kind == "step" and not math.isnan(m.overshoot)]
     if steps:
         def over_ratio(m: SegmentMetrics) -> float:
@@ -717,6 +429,17 @@ def evaluate(trajectory: Trajectory, reference: Reference, spec: Specification, 
                             w.tracking_error <= spec.max_ramp_error,
                             f"{w.segment.describe()} "
                             f"({abs(w.segment.size) / w.segment.duration * 1e3:.0f} mm/s)"))
+    return checks
+
+
+def _limit_checks(t: np.ndarray, p_a: np.ndarray, p_b: np.ndarray, metrics: Metrics,
+                  spec: Specification, u_range: tuple[float, float],
+                  p_range: tuple[float, float]) -> list[Check]:
+    """Command saturation and chamber pressure bounds over the whole run."""
+    (u_min, u_max), (p_atm, p_sup) = u_range, p_range
+    sat_frac, p_min, p_max = metrics.saturation_fraction, metrics.p_min, metrics.p_max
+    p_all = np.concatenate((p_a, p_b))
+    checks: list[Check] = []
     checks.append(Check("command saturation", 100.0 * sat_frac, 100.0 * spec.max_saturation, "%",
                         sat_frac <= spec.max_saturation,
                         f"time at {u_min:g} V or {u_max:g} V: {sat_frac * (t[-1] - t[0]):.2f} s"))
@@ -731,10 +454,7 @@ def evaluate(trajectory: Trajectory, reference: Reference, spec: Specification, 
     checks.append(Check("max chamber pressure", p_max, hi, "Pa", p_max <= hi,
                         f"{ch_hi} at t = {t[k_hi]:.2f} s; supply {p_sup / 1e5:.3f} bar "
                         f"+ {spec.pressure_tolerance / 1e5:g} bar"))
-    return Validation(trajectory=trajectory, reference=reference, spec=spec, segments=seg_m,
-                      checks=tuple(checks), metrics=metrics, command_range=(u_min, u_max),
-                      pressure_range=(p_atm, p_sup), error=None if completed else (error or
-                      "trajectory ends before the reference"), wall_time=wall_time, label=label)
+    return checks
 
 
 def _overshoot_limit(spec: Specification, m: SegmentMetrics) -> float:
@@ -843,8 +563,20 @@ def validate(plant, controller=None, spec: Specification | None = None,
         return simulate.closed_loop(plant, proxy, reference, t_end=n * T, x0=x0,
                                     output_times=out_t, progress=progress)
 
-    error = None
     t0 = _time.perf_counter()
+    traj, error = _run_keeping_failures(run, duration, controller, T)
+    wall = _time.perf_counter() - t0
+    traj, error = _finite_part(traj, duration, error)
+    return evaluate(traj, reference, spec, plant, error=error, wall_time=wall, label=label)
+
+
+def _run_keeping_failures(run: Callable, duration: float, controller,
+                          T: float) -> tuple[Trajectory, str | None]:
+    """Simulate to ``duration`` (s); if the solver gives up, the part up to the failure.
+
+    Returns the trajectory and the solver's message (None when it ran through).
+    """
+    error = None
     proxy = _Counting(controller)
     try:
         traj = run(duration, proxy)
@@ -865,11 +597,15 @@ def validate(plant, controller=None, spec: Specification | None = None,
                 traj = run(0.0, _Counting(controller))
             except WorkbenchError as exc0:
                 raise WorkbenchError(f"the simulation cannot even start: {exc0}") from None
-    wall = _time.perf_counter() - t0
+    return traj, error
+
+
+def _finite_part(traj: Trajectory, duration: float,
+                 error: str | None) -> tuple[Trajectory, str | None]:
+    """The trajectory cut at the reference's end (s) and before any non-finite sample."""
     beyond = np.flatnonzero(traj.time > duration + 1e-9)
     if len(beyond):                              # the last period ran past the reference's end
         traj = _truncate(traj, int(beyond[0]))
-
     sig = np.column_stack([traj["x"], traj["u"], traj["p_a"], traj["p_b"]])
     bad = np.flatnonzero(~np.all(np.isfinite(sig), axis=1))
     if len(bad):
@@ -877,4 +613,4 @@ def validate(plant, controller=None, spec: Specification | None = None,
         if error is None:
             error = f"the simulation produced non-finite values at t = {traj.time[k]:.3f} s"
         traj = _truncate(traj, max(k, 1))
-    return evaluate(traj, reference, spec, plant, error=error, wall_time=wall, label=label)
+    return traj, error

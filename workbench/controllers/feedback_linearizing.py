@@ -540,7 +540,7 @@ def feedback_linearizing(plant, bandwidth: float, *, damping: float = 1.0, integ
     design = None
     if check:
         if reference is None:
-            from ..validate import validation_profile
+            from ..references import validation_profile
             reference = validation_profile(plant)
         if pressures is None:
             pressures = _design_pressures(model, plant, 0.5 * plant.stroke)

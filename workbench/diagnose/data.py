@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
 
 from ..errors import InputError
 from ..plant import Plant
 from ..recording import Recording
+from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
 
 __all__ = ["Prepared", "prepare", "MIN_DURATION", "SHORT_DURATION", "savgol"]
 
@@ -40,35 +40,9 @@ CONTROLLER_AGREEMENT = 90.0
 WINDOW_SLOW = 0.101
 
 
-def _odd_window(seconds: float, dt: float, minimum: int = 5) -> int:
-    n = max(int(round(seconds / dt)), minimum)
-    return n if n % 2 else n + 1
-
-
-def savgol(y: np.ndarray, window: int, order: int, deriv: int = 0, dt: float = 1.0) -> np.ndarray:
-    """Savitzky-Golay filter (``mode="interp"`` at the ends)."""
-    window = min(window, len(y) - (1 - len(y) % 2))
-    order = min(order, window - 1)
-    return savgol_filter(np.asarray(y, dtype=float), window, order, deriv=deriv, delta=dt,
-                         mode="interp")
-
-
-def _noise_std(y: np.ndarray) -> float:
-    """Sensor noise (standard deviation) of ``y``: robust spread of its fine structure.
-
-    A quantised signal whose noise is below one step (LSB) shows long runs of equal
-    values, so the robust spread alone would say "no noise"; the quantisation error
-    (LSB / sqrt 12) is then the noise floor.
-    """
-    w, o = 7, 2
-    resid = y - savgol(y, w, o)
-    h0 = savgol_coeffs(w, o)[w // 2]
-    mad = np.median(np.abs(resid - np.median(resid)))
-    robust = float(1.4826 * mad / np.sqrt(1.0 - h0))
-    steps = np.abs(np.diff(y))
-    steps = steps[steps > 0]
-    lsb = float(np.percentile(steps, 1)) if len(steps) else 0.0
-    return max(robust, lsb / np.sqrt(12.0))
+# The smoothing, derivatives and noise floor are those of workbench.signals, shared with
+# the grey-box fit (savgol is re-exported here for the diagnosis modules).
+_noise_std = noise_floor
 
 
 @dataclass
@@ -83,7 +57,7 @@ class Prepared:
     x, p_a, p_b : measured (p_* None without pressures).
     xs, v, a : smoothed position (m), velocity (m/s), acceleration (m/s^2).
     pas, pbs, dpa, dpb : smoothed pressures (Pa) and their rates (Pa/s).
-    noise : sensor noise per signal (same unit).
+    noise : sensor noise per signal (same unit), :func:`workbench.signals.noise_floor`.
     signals : the measured outputs fitted (x, and p_a, p_b when recorded).
     notes : what was reduced or assumed, in words for the report.
     """
@@ -162,6 +136,58 @@ def _controller_phase(u: np.ndarray, ratio: int) -> tuple[int, float]:
     return ph, float(counts[ph] / counts.sum())
 
 
+def _plant_controller(plant: Plant, rec: Recording, dt: float,
+                      notes: list[str]) -> tuple[Any, int, int]:
+    """The plant file's controller (None without one, or when its period is not a
+    multiple of the sample time ``dt``, s), samples per period, phase of its updates."""
+    if not plant.params.has_controller:
+        return None, 1, 0
+    from ..controllers import from_plant
+    controller = from_plant(plant)
+    ratio = int(round(controller.sample_time / dt))
+    if ratio < 1 or abs(ratio * dt - controller.sample_time) > 0.02 * dt:
+        notes.append(f"the controller period ({controller.sample_time:g} s) is not a "
+                     f"multiple of the sample time ({dt:g} s): open-loop replay")
+        return None, 1, 0
+    phase, _share = _controller_phase(np.asarray(rec["u"]), ratio)
+    return controller, ratio, phase
+
+
+def _smoothed(rec: Recording, x: np.ndarray, dt: float, win_x: int, win_p: int,
+              has_p: bool) -> dict[str, Any]:
+    """Smoothed signals, their derivatives and the noise floors (Prepared's fields).
+
+    Position: cubic Savitzky-Golay over ``win_x`` samples (value, velocity m/s,
+    acceleration m/s^2); pressures: quadratic over ``win_p`` (value, rate Pa/s).
+    """
+    out: dict[str, Any] = {
+        "xs": smooth(x, win_x, 3), "v": derivative(x, dt, 3, win_x),
+        "a": derivative(x, dt, 3, win_x, deriv=2), "noise": {"x": noise_floor(x), "u": 0.0},
+        "p_a": None, "p_b": None, "pas": None, "pbs": None, "dpa": None, "dpb": None}
+    if has_p:
+        for name, short in (("p_a", "a"), ("p_b", "b")):
+            p = np.asarray(rec[name], dtype=float)
+            out[name], out[f"p{short}s"] = p, smooth(p, win_p, 2)
+            out[f"dp{short}"] = derivative(p, dt, 2, win_p)
+            out["noise"][name] = noise_floor(p)
+    return out
+
+
+def _controller_agreement(plant: Plant, controller: Any, rec: Recording, x: np.ndarray,
+                          phase: int, ratio: int) -> float:
+    """Fit (%) of the recorded command by the plant file's controller at its instants."""
+    idx = np.arange(len(x))[phase::ratio]
+    state = controller.reset()
+    u_pred = np.empty(len(idx))
+    r_rec = np.asarray(rec["r"])
+    for j, i in enumerate(idx):
+        state, u_pred[j] = controller.update(state, float(r_rec[i]), {"x": float(x[i])})
+    u_pred = np.clip(u_pred, plant.params["valve.command_min"],
+                     plant.params["valve.command_max"])
+    u_rec = np.asarray(rec["u"])[idx]
+    return fit(u_rec, u_pred) if np.ptp(u_rec) > 0 else 100.0
+
+
 def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
     """Check the recording against the plant and prepare the signals.
 
@@ -211,19 +237,8 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
                      "cannot be told apart from position alone")
     has_r = "r" in rec
     has_ctrl = plant.params.has_controller
-    controller = None
-    ratio, phase = 1, 0
+    controller, ratio, phase = _plant_controller(plant, rec, dt, notes)
     closed = False
-    if has_ctrl:
-        from ..controllers import from_plant
-        controller = from_plant(plant)
-        ratio = int(round(controller.sample_time / dt))
-        if ratio < 1 or abs(ratio * dt - controller.sample_time) > 0.02 * dt:
-            notes.append(f"the controller period ({controller.sample_time:g} s) is not a "
-                         f"multiple of the sample time ({dt:g} s): open-loop replay")
-            ratio, controller = 1, None
-        else:
-            phase, share = _controller_phase(np.asarray(rec["u"]), ratio)
     if mode == "closed":
         if not has_r:
             raise InputError("closed-loop replay needs an 'r' column", source=src)
@@ -238,37 +253,11 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
     elif has_ctrl and not has_r and controller is not None:
         notes.append("the plant file has a [controller] but the recording has no reference r: "
                      "open-loop replay on the recorded command u, re-anchored")
-    win_x = _odd_window(WINDOW_X, dt)
-    win_p = _odd_window(WINDOW_P, dt)
-    xs = savgol(x, win_x, 3)
-    v = savgol(x, win_x, 3, deriv=1, dt=dt)
-    a = savgol(x, win_x, 3, deriv=2, dt=dt)
-    noise = {"x": _noise_std(x), "u": 0.0}
-    pa = pb = pas = pbs = dpa = dpb = None
-    if has_p:
-        pa = np.asarray(rec["p_a"], dtype=float)
-        pb = np.asarray(rec["p_b"], dtype=float)
-        pas, pbs = savgol(pa, win_p, 2), savgol(pb, win_p, 2)
-        dpa = savgol(pa, win_p, 2, deriv=1, dt=dt)
-        dpb = savgol(pb, win_p, 2, deriv=1, dt=dt)
-        noise["p_a"], noise["p_b"] = _noise_std(pa), _noise_std(pb)
+    win_x, win_p = odd_window(WINDOW_X, dt), odd_window(WINDOW_P, dt)
+    sm = _smoothed(rec, x, dt, win_x, win_p, has_p)
     if has_r and controller is not None and mode != "open":
         closed = True
-        # Does the plant file's controller reproduce the recorded command?
-        from ..recording import fit
-        inst = np.zeros(n, dtype=bool)
-        inst[phase::ratio] = True
-        idx = np.flatnonzero(inst)
-        c = controller
-        state = c.reset()
-        u_pred = np.empty(len(idx))
-        r_rec = np.asarray(rec["r"])
-        for j, i in enumerate(idx):
-            state, u_pred[j] = c.update(state, float(r_rec[i]), {"x": float(x[i])})
-        u_pred = np.clip(u_pred, plant.params["valve.command_min"],
-                         plant.params["valve.command_max"])
-        u_rec = np.asarray(rec["u"])[idx]
-        agree = fit(u_rec, u_pred) if np.ptp(u_rec) > 0 else 100.0
+        agree = _controller_agreement(plant, controller, rec, x, phase, ratio)
         if agree < CONTROLLER_AGREEMENT and mode != "closed":
             closed = False
             notes.append(f"the plant file's [controller] does not reproduce the recorded command "
@@ -276,7 +265,6 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
                          "recording is replayed open loop on u, re-anchored")
     return Prepared(plant=plant, rec=rec, t=t, dt=dt, closed=closed,
                     controller=controller if closed else controller, ratio=ratio, phase=phase,
-                    x=x, p_a=pa, p_b=pb, xs=xs, v=v, a=a, pas=pas, pbs=pbs, dpa=dpa, dpb=dpb,
-                    noise=noise, signals=("x",) + (("p_a", "p_b") if has_p else ()),
-                    win_x=win_x, win_p=win_p, win_slow=_odd_window(WINDOW_SLOW, dt, 9),
+                    x=x, **sm, signals=("x",) + (("p_a", "p_b") if has_p else ()),
+                    win_x=win_x, win_p=win_p, win_slow=odd_window(WINDOW_SLOW, dt, 9),
                     notes=notes)

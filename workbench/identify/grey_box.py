@@ -119,6 +119,7 @@ from ..errors import InputError, WorkbenchError
 from ..params import EFFECTS, SCHEMA
 from ..plant import Plant
 from ..recording import Recording, fit as nrmse_fit, load_recording
+from ..signals import autocorrelation, derivative, fraction_outside, noise_floor, odd_window
 
 __all__ = ["estimate", "GreyBoxResult", "SIGNALS", "RADAU_TABLES", "noise_std",
            "synthetic_recording"]
@@ -516,21 +517,10 @@ def _as_recording(item: Any, k: int) -> Recording:
                      f"{type(item).__name__}")
 
 
-def noise_std(y: np.ndarray) -> float:
-    """Measurement noise standard deviation of a sampled signal, model-free.
-
-    From the third differences (which remove a smooth signal sampled fast): a robust
-    (median absolute deviation) estimate, or the RMS of the central 90 % when more
-    than half of the differences are zero (quantised signals at rest).
-    """
-    d = np.diff(np.asarray(y, dtype=float), 3)
-    if d.size < 8:
-        return 0.0
-    mad = float(np.median(np.abs(d - np.median(d))))
-    if mad > 0.0:
-        return 1.4826 * mad / math.sqrt(20.0)
-    a = np.sort(np.abs(d))[: max(1, int(0.9 * d.size))]
-    return float(np.sqrt(np.mean(a * a)) / math.sqrt(20.0))
+#: Measurement noise standard deviation of a sampled signal, model-free: the one
+#: estimator of the workbench (:func:`workbench.signals.noise_floor`), also used by
+#: the diagnosis, so a recording gets the same noise numbers in both.
+noise_std = noise_floor
 
 
 def _prepare(plant: Plant, recordings: Sequence[Any], signals: Sequence[str],
@@ -1096,15 +1086,17 @@ class _Problem:
 
 # ====================================================================== helpers
 def _smooth_derivative(t: np.ndarray, y: np.ndarray, window_s: float = 0.02) -> np.ndarray:
-    """dy/dt by central differences over about ``window_s`` (noise-robust, numpy only)."""
-    n = len(y)
+    """dy/dt (unit of y per s): Savitzky-Golay slope over about ``window_s`` (s).
+
+    :func:`workbench.signals.derivative`, quadratic fits (the slope of a straight
+    line fitted over the window inside; unbiased by curvature at the ends).
+    """
     dt = float(np.median(np.diff(t)))
-    m = max(1, min(int(round(0.5 * window_s / dt)), (n - 1) // 2))
-    out = np.empty(n)
-    out[m:n - m] = (y[2 * m:] - y[:n - 2 * m]) / (t[2 * m:] - t[:n - 2 * m])
-    out[:m] = (y[m] - y[0]) / (t[m] - t[0]) if m else 0.0
-    out[n - m:] = (y[-1] - y[-1 - m]) / (t[-1] - t[-1 - m]) if m else 0.0
-    return out
+    n = len(y)
+    window = min(odd_window(window_s, dt, 3), n if n % 2 else n - 1)
+    if window < 3:
+        return np.zeros(n)
+    return derivative(y, dt, order=2, window=window)
 
 
 def _first_value(t: np.ndarray, y: np.ndarray, n: int = 11) -> float:
@@ -1194,13 +1186,11 @@ def _use_closed_loop(replay: str, rec: Recording, plant: Plant) -> bool:
 
 def _whiteness(e: np.ndarray, lags: int = 25) -> float:
     """Fraction of autocorrelation lags 1..lags outside the 99 % band +-2.58/sqrt(N)."""
-    e = np.asarray(e, dtype=float) - np.mean(e)
     n = len(e)
-    den = float(np.dot(e, e))
-    if n < 4 * lags or den == 0.0:
+    r = autocorrelation(e, lags) if n >= 4 * lags else np.full(lags + 1, np.nan)
+    if not np.isfinite(r[0]):
         return float("nan")
-    acf = np.array([float((e[:-k] * e[k:]).sum()) / den for k in range(1, lags + 1)])
-    return float(np.mean(np.abs(acf) > 2.58 / math.sqrt(n)))
+    return fraction_outside(r[1:], n, band=2.58 / math.sqrt(n))
 
 
 def _fits(rec_y: Mapping[str, np.ndarray], run) -> dict[str, float]:

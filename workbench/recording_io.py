@@ -1,0 +1,434 @@
+"""Recording files: the CSV and MATLAB ``.mat`` parsers and the atomic writer.
+
+The readers turn a file into raw columns, data and metadata together with a
+*locator* (:class:`Where` and its subclasses) that names the line, column, variable
+or element of a sample in error messages; :mod:`workbench.recording` checks the
+result against the contract of ``formats.md`` section 3 and builds the
+:class:`~workbench.recording.Recording`. Use ``Recording.load`` rather than these.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["KNOWN_COLUMNS", "REQUIRED_COLUMNS", "read_csv", "read_mat", "write_atomic"]
+
+#: Column names with a meaning (formats.md section 3); others are kept as they are.
+KNOWN_COLUMNS: tuple[str, ...] = ("t", "u", "x", "p_a", "p_b", "r", "p_s", "v")
+#: Columns every recording must have.
+REQUIRED_COLUMNS: tuple[str, ...] = ("t", "u", "x")
+
+
+# --------------------------------------------------------------------------------------
+# Where a sample came from: turns (column, index) into a location the user can find
+# --------------------------------------------------------------------------------------
+class Where:
+    """Locations for in-memory arrays (0-based sample index)."""
+
+    def header(self) -> str | None:
+        return None
+
+    def column(self, name: str) -> str:
+        return f"column '{name}'"
+
+    def sample(self, index: int) -> str:
+        return f"index {index}"
+
+    def cell(self, name: str, index: int) -> str:
+        return f"column '{name}', index {index}"
+
+    def meta(self, key: str) -> str:
+        return f"metadata '{key}'"
+
+
+class CsvWhere(Where):
+    """Locations in a CSV file: 1-based file lines, counting metadata and header."""
+
+    def __init__(self, path: Path, header_line: int, meta_lines: Mapping[str, int],
+                 row_lines: list[int] | None = None) -> None:
+        self.path = path
+        self.header_line = header_line
+        self.meta_lines = meta_lines
+        self.row_lines = row_lines  # file line of every data row, when known
+
+    def header(self) -> str:
+        return f"line {self.header_line} (header)"
+
+    def sample(self, index: int) -> str:
+        return f"line {self._line_of(index)}"
+
+    def cell(self, name: str, index: int) -> str:
+        return f"line {self._line_of(index)}, column '{name}'"
+
+    def meta(self, key: str) -> str:
+        line = self.meta_lines.get(key)
+        return f"line {line}, metadata '{key}'" if line else f"metadata '{key}'"
+
+    def _line_of(self, index: int) -> int:
+        if self.row_lines is None:
+            # Only reached when reporting an error: scan the file once for row lines.
+            self.row_lines = []
+            with open(self.path, encoding="utf-8-sig") as fh:
+                for lineno, raw in enumerate(fh, start=1):
+                    if lineno > self.header_line and _strip_comment(raw):
+                        self.row_lines.append(lineno)
+        return self.row_lines[index]
+
+
+class MatWhere(Where):
+    """Locations in a .mat file: variable names and 1-based (MATLAB) element numbers."""
+
+    def header(self) -> str:
+        return "variables"
+
+    def column(self, name: str) -> str:
+        return f"variable '{name}'"
+
+    def sample(self, index: int) -> str:
+        return f"element {index + 1}"
+
+    def cell(self, name: str, index: int) -> str:
+        return f"variable '{name}', element {index + 1}"
+
+    def meta(self, key: str) -> str:
+        return f"variable '{key}'"
+
+#: What a reader returns: columns, data by column, metadata, source, locator.
+Parsed = tuple[list[str], dict[str, np.ndarray], dict[str, str], str, Where]
+
+
+# --------------------------------------------------------------------------------------
+# Files
+# --------------------------------------------------------------------------------------
+def _check_file(path: Path) -> None:
+    if not path.exists():
+        raise InputError("file not found", source=str(path))
+    if path.is_dir():
+        raise InputError("is a directory, expected a recording file", source=str(path))
+    if path.stat().st_size == 0:
+        raise InputError("the file is empty", source=str(path))
+
+
+def _strip_comment(raw: str) -> str:
+    """Text of a data line without a trailing '#' comment and surrounding space."""
+    return raw.split("#", 1)[0].strip()
+
+
+def read_csv(path: Path) -> Parsed:
+    """Parse a CSV recording file (formats.md section 3); see ``Recording.from_csv``.
+
+    Returns the raw columns, data, metadata, source and locations, not yet checked
+    against the contract (:mod:`workbench.recording` does that).
+    """
+    src = str(path)
+    _check_file(path)
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            metadata, meta_lines, header, header_line = _read_preamble(fh, src)
+            columns, sep = _parse_header(header, header_line, src)
+            arrays = _fast_parse(fh, len(columns), sep)
+        where = CsvWhere(path, header_line, meta_lines)
+        if isinstance(arrays, tuple):
+            # pandas pointed at one bad row: check only that line, which raises ...
+            kind, k = arrays
+            if kind == "row":
+                _slow_parse(path, header_line, columns, sep, src, only_row=k)
+            else:
+                _slow_parse(path, header_line, columns, sep, src,
+                            only_line=header_line + k)
+            arrays = None  # ... unless pandas and Python disagree: then scan it all
+        if arrays is None:
+            arrays, where.row_lines = _slow_parse(path, header_line, columns, sep, src)
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not a UTF-8 text file (undecodable byte at offset {exc.start}); "
+                         "a recording CSV is plain text", source=src) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror or exc})", source=src) from None
+    return columns, dict(zip(columns, arrays)), metadata, src, where
+
+
+def _read_preamble(fh: Any, src: str) -> tuple[dict[str, str], dict[str, int], str, int]:
+    """Read metadata lines up to the header; leave ``fh`` just after the header."""
+    metadata: dict[str, str] = {}
+    meta_lines: dict[str, int] = {}
+    lineno = 0
+    comments = 0
+    while True:
+        raw = fh.readline()
+        if raw == "":
+            break
+        lineno += 1
+        text = raw.strip()
+        if not text:
+            continue
+        if text.startswith("#"):
+            comments += 1
+            key, colon, value = text[1:].partition(":")
+            key, value = key.strip(), value.strip()
+            if not colon or not key:
+                continue  # a plain comment, not "key: value"
+            if key in metadata:
+                if value not in metadata[key].split("\n"):
+                    metadata[key] += "\n" + value  # repeated key: keep every value
+            else:
+                metadata[key] = value
+                meta_lines[key] = lineno
+            continue
+        return metadata, meta_lines, text, lineno
+    if comments == 0:
+        raise InputError("the file is empty (only blank lines)", source=src)
+    raise InputError(f"no header and no data: the file has only '#' comment or metadata "
+                     f"lines; expected a header such as '{','.join(KNOWN_COLUMNS[:6])}' "
+                     "followed by one row per sample", source=src, location=f"line {lineno}")
+
+
+def _parse_header(header: str, line: int, src: str) -> tuple[list[str], str | None]:
+    """Column names and separator (None: white space) from the header line."""
+    for sep in (",", "\t", ";"):
+        if sep in header:
+            break
+    else:
+        sep = None
+    cells = header.split(sep) if sep else header.split()
+    names = [c.strip().strip('"').strip("'").strip() for c in cells]
+    location = f"line {line} (header)"
+    if all(_is_number(c) for c in names):
+        raise InputError(f"the first line that is not a '#' comment holds numbers "
+                         f"({header[:60]!r}), not column names; add a header such as "
+                         f"'{','.join(KNOWN_COLUMNS[:6])}'", source=src, location=location)
+    for k, name in enumerate(names, start=1):
+        if not name:
+            raise InputError(f"column {k} of the header has no name", source=src,
+                             location=location)
+    first: dict[str, int] = {}
+    for k, name in enumerate(names, start=1):
+        if name in first:
+            raise InputError(f"duplicate column name '{name}' (columns {first[name]} and "
+                             f"{k}); each column must appear once", source=src,
+                             location=location)
+        first[name] = k
+    return names, sep
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _fast_parse(fh: Any, ncols: int, sep: str | None
+                ) -> list[np.ndarray] | tuple[str, int] | None:
+    """Parse the data rows with pandas' C reader.
+
+    Returns the columns as float64 arrays; or ``("row", i)``, the 0-based index of the
+    first data row that is not all finite numbers (a NaN/inf, a text or empty cell, too
+    few cells); or ``("line", k)`` when pandas stopped at the k-th line after the header
+    (too many cells); or None if pandas failed otherwise or found the wrong number of
+    columns. The caller checks the suspect row with the slow parser, which reports it.
+    """
+    import warnings
+
+    import pandas as pd
+    from pandas.api import types
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", pd.errors.DtypeWarning)  # mixed: text cells
+            frame = pd.read_csv(fh, sep=sep if sep else r"\s+", header=None,
+                                engine="c", comment="#", skip_blank_lines=True,
+                                index_col=False)
+    except UnicodeDecodeError:
+        raise
+    except pd.errors.ParserError as exc:
+        match = re.search(r"Expected \d+ fields in line (\d+)", str(exc))
+        return ("line", int(match.group(1))) if match else None
+    except Exception:  # malformed somewhere: the slow path finds and reports where
+        return None
+    if frame.shape[1] != ncols or frame.shape[0] < 1:
+        return None
+    arrays = []
+    for k in range(ncols):
+        col = frame.iloc[:, k]
+        if types.is_bool_dtype(col.dtype):
+            arr = np.full(col.shape[0], np.nan)  # True/False: report the first row
+        elif types.is_numeric_dtype(col.dtype):
+            arr = col.to_numpy(dtype=np.float64)
+        else:  # text somewhere in the column: NaN where a cell is not a number
+            arr = pd.to_numeric(col, errors="coerce").to_numpy(dtype=np.float64,
+                                                               na_value=np.nan)
+        arrays.append(arr)
+    finite = np.ones(frame.shape[0], dtype=bool)
+    for arr in arrays:
+        finite &= np.isfinite(arr)
+    if not finite.all():
+        return ("row", int(np.argmin(finite)))
+    return arrays
+
+
+def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | None,
+                src: str, only_row: int | None = None, only_line: int | None = None
+                ) -> tuple[list[np.ndarray], list[int]]:
+    """Parse row by row, raising on the first bad line; also return each row's line.
+
+    With ``only_row`` (0-based data row) or ``only_line`` (1-based file line), skip to
+    that row without parsing the others, and check only it.
+    """
+    ncols = len(columns)
+    rows: list[list[float]] = []
+    row_lines: list[int] = []
+    count = -1
+    with open(path, encoding="utf-8-sig") as fh:
+        for lineno, raw in enumerate(fh, start=1):
+            if lineno <= header_line:
+                continue
+            text = _strip_comment(raw)
+            if not text:
+                continue
+            count += 1
+            if only_row is not None and count != only_row:
+                continue
+            if only_line is not None and lineno != only_line:
+                continue
+            cells = text.split(sep) if sep else text.split()
+            if len(cells) != ncols:
+                raise InputError(f"{len(cells)} cells in this row but the header has "
+                                 f"{ncols} ({','.join(columns)})", source=src,
+                                 location=f"line {lineno}")
+            row = []
+            for name, cell in zip(columns, cells):
+                cell = cell.strip().strip('"').strip()
+                try:
+                    value = float(cell)
+                except ValueError:
+                    what = "an empty cell" if not cell else f"{cell!r}"
+                    hint = ""
+                    if "," in cell and sep != ",":
+                        hint = " (decimal comma? write numbers with a decimal point)"
+                    raise InputError(f"{what} is not a number{hint}", source=src,
+                                     location=f"line {lineno}, column '{name}'") from None
+                if not math.isfinite(value):
+                    raise InputError(f"{cell!r} ({value}) is not allowed: every cell must "
+                                     "be a finite number", source=src,
+                                     location=f"line {lineno}, column '{name}'")
+                row.append(value)
+            rows.append(row)
+            row_lines.append(lineno)
+            if only_row is not None or only_line is not None:
+                break
+    if not rows:
+        raise InputError(f"no data rows after the header (line {header_line}): a "
+                         "recording needs one row per sample", source=src,
+                         location=f"line {header_line}")
+    values = np.array(rows, dtype=np.float64)
+    return [values[:, k] for k in range(ncols)], row_lines
+
+
+def read_mat(path: Path) -> Parsed:
+    """Parse a MATLAB ``.mat`` recording (v4 to v7); see ``Recording.from_mat``."""
+    src = str(path)
+    _check_file(path)
+    import scipy.io
+
+    try:
+        raw = scipy.io.loadmat(str(path), squeeze_me=False, chars_as_strings=True)
+    except NotImplementedError:
+        raise InputError("this is a MATLAB v7.3 (HDF5) file, which cannot be read; in "
+                         "MATLAB save it again as v7: save(filename, 't', 'u', 'x', ..., "
+                         "'-v7')", source=src) from None
+    except Exception as exc:  # scipy raises ValueError, TypeError, OSError, ...
+        raise InputError(f"cannot read as a MATLAB .mat file ({exc})", source=src) from None
+    where = MatWhere()
+    variables = {k: v for k, v in raw.items() if not k.startswith("__")}
+    missing = [c for c in REQUIRED_COLUMNS if c not in variables]
+    if missing:
+        listed = ", ".join(f"'{c}'" for c in missing)
+        raise InputError(f"missing required variable{'s' if len(missing) > 1 else ''} "
+                         f"{listed}; variables found: {', '.join(variables) or '(none)'}; "
+                         f"required: {', '.join(REQUIRED_COLUMNS)}", source=src,
+                         location=where.header())
+
+    def vector(name: str) -> np.ndarray:
+        value = np.asarray(variables[name])
+        if value.dtype.kind not in "iuf":
+            raise InputError(f"is not numeric (it holds {_mat_kind(value)}); expected a "
+                             "vector of doubles", source=src, location=where.column(name))
+        vec = np.squeeze(value)
+        if vec.ndim != 1:
+            raise InputError(f"expected a vector, got an array of size "
+                             f"{'x'.join(map(str, value.shape))}", source=src,
+                             location=where.column(name))
+        return vec.astype(np.float64)
+
+    t = vector("t")
+    n = t.shape[0]
+    columns: list[str] = []
+    data: dict[str, np.ndarray] = {}
+    metadata: dict[str, str] = {}
+    for name, value in variables.items():
+        arr = np.asarray(value)
+        if name == "sample_time":
+            if arr.dtype.kind not in "iuf" or arr.size != 1:
+                raise InputError(f"sample_time must be a numeric scalar (s), got "
+                                 f"{_mat_kind(arr)}", source=src, location=where.meta(name))
+            metadata[name] = repr(float(arr.ravel()[0]))
+        elif name in KNOWN_COLUMNS:
+            vec = vector(name)
+            if vec.shape[0] != n:
+                raise InputError(f"has {vec.shape[0]} elements but 't' has {n}; every "
+                                 "signal needs one value per sample", source=src,
+                                 location=where.column(name))
+            columns.append(name)
+            data[name] = vec
+        elif arr.dtype.kind in "iuf" and arr.size == 1:
+            metadata[name] = repr(float(arr.ravel()[0]))
+        elif arr.dtype.kind in "iuf" and np.squeeze(arr).ndim == 1 and arr.size == n:
+            columns.append(name)
+            data[name] = np.squeeze(arr).astype(np.float64)
+        elif arr.dtype.kind == "U" and arr.size == 1:
+            metadata[name] = " ".join(str(arr.ravel()[0]).split())
+        # anything else (structs, cells, matrices, other lengths) is not a signal
+    return columns, data, metadata, src, where
+
+
+def _mat_kind(value: np.ndarray) -> str:
+    kind = {"U": "text", "S": "text", "O": "a cell array", "V": "a struct",
+            "b": "logicals", "c": "complex numbers"}.get(value.dtype.kind,
+                                                         f"dtype {value.dtype}")
+    return f"{kind} of size {'x'.join(map(str, value.shape))}"
+
+
+def write_atomic(path: Path, head: list[str], rows: Iterable[str]) -> None:
+    """Write ``head`` then ``rows`` to a temporary file next to ``path``, then rename."""
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise InputError("cannot write: the directory does not exist", source=str(path))
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as out:
+            out.writelines(head)
+            out.writelines(rows)
+            out.flush()
+            os.fsync(out.fileno())
+        try:  # mkstemp makes the file private; give it the usual permissions
+            mode = path.stat().st_mode & 0o777 if path.exists() else 0o644
+            os.chmod(tmp, mode)
+        except OSError:
+            pass
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise

@@ -1,0 +1,155 @@
+"""Position references r(t): steps, piecewise-linear profiles, the validation profile.
+
+A :class:`Reference` is a position (m) as a function of time (s), either held
+between its points (steps) or linear between them (ramps and holds). Simulators,
+controllers and the validation all take one; none of them needs the others to build
+one (``simulate.steps``, ``simulate.profile`` and ``validate.validation_profile``
+re-export the functions defined here).
+
+Examples
+--------
+>>> from workbench.references import steps, profile, validation_profile
+>>> ref = steps([0.1, 0.4, 0.25], hold=2.0)
+>>> float(ref(3.0)), ref.duration
+(0.4, 6.0)
+>>> float(profile([(0.0, 0.1), (1.0, 0.3)])(0.5))
+0.2
+>>> round(validation_profile(0.5).duration, 2)
+22.75
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["Reference", "steps", "profile", "validation_profile"]
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A position reference r(t) (m): piecewise linear through (times, values).
+
+    Attributes
+    ----------
+    times : numpy.ndarray
+        Break points, s, not decreasing.
+    values : numpy.ndarray
+        Positions at the break points, m.
+    hold : bool
+        True: each value is held until the next break point (steps); False: linear
+        interpolation between break points (ramps and holds).
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    hold: bool = False
+
+    def __call__(self, t: float | np.ndarray) -> np.ndarray:
+        if self.hold:
+            idx = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 1)
+            return self.values[idx]
+        return np.interp(t, self.times, self.values)
+
+    @property
+    def duration(self) -> float:
+        """Time of the last break point, s."""
+        return float(self.times[-1])
+
+
+def steps(levels: Sequence[float], hold: float, t0: float = 0.0) -> Reference:
+    """Step reference: each level (m) held for ``hold`` seconds, the first from ``t0`` (s)."""
+    levels = np.asarray(levels, dtype=float)
+    times = t0 + hold * np.arange(len(levels) + 1)
+    return Reference(times=times, values=np.append(levels, levels[-1]), hold=True)
+
+
+def profile(points: Sequence[tuple[float, float]]) -> Reference:
+    """Piecewise-linear reference through (time s, position m) points (ramps and holds)."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 2 or np.any(np.diff(pts[:, 0]) < 0):
+        raise InputError("a profile is a list of (time, position) with time not decreasing")
+    return Reference(times=pts[:, 0], values=pts[:, 1], hold=False)
+
+
+def validation_profile(plant, large_step: float | None = None, small_step: float | None = None,
+                       hold: float = 2.5, ramp_speed: float | None = None,
+                       margin: float = 0.1, start_hold: float = 0.5) -> Reference:
+    """The standard validation reference for a plant (piecewise linear, m).
+
+    Starting at rest at mid-stroke ``c = L/2`` (``L`` the stroke):
+
+    1. hold ``start_hold`` at ``c``;
+    2. large step up to ``c + a``, hold; large step down (size ``2 a``) to ``c - a``, hold;
+    3. small step up to ``c - a + s``, hold; small step down to ``c - a``, hold;
+    4. ramp up at ``ramp_speed`` to ``(1 - margin) L``, hold;
+       ramp down to ``margin L``, hold.
+
+    Every level stays within [margin L, (1 - margin) L]. With the defaults on a
+    0.5 m stroke: steps of 125, 250 and 10 mm, ramps at 0.1 m/s, 22.75 s in all.
+
+    Parameters
+    ----------
+    plant : Plant or float
+        The plant (its stroke is used) or the stroke itself, m.
+    large_step : float, m
+        ``a``; default a quarter of the stroke.
+    small_step : float, m
+        ``s``; default 2 % of the stroke (10 mm on 0.5 m).
+    hold : float, s
+        Hold after every step and ramp. Default 2.5 s (settling time limit 1.5 s plus
+        the steady-state window 0.5 s, with room to spare).
+    ramp_speed : float, m/s
+        Default 0.2 stroke per second.
+    margin : float, -
+        Fraction of the stroke kept free at each end. Default 0.1.
+    start_hold : float, s
+        Initial hold at mid-stroke. Default 0.5 s.
+
+    Returns
+    -------
+    Reference
+        A :func:`profile`.
+    """
+    L = float(plant.stroke) if hasattr(plant, "stroke") else float(plant)
+    if not (math.isfinite(L) and L > 0):
+        raise InputError(f"stroke must be a positive length in m, got {L!r}")
+    if not 0.0 <= margin < 0.5:
+        raise InputError(f"margin is a fraction of the stroke in [0, 0.5), got {margin!r}")
+    lo, hi, c = margin * L, (1.0 - margin) * L, 0.5 * L
+    a = 0.25 * L if large_step is None else float(large_step)
+    s = 0.02 * L if small_step is None else float(small_step)
+    v = 0.2 * L if ramp_speed is None else float(ramp_speed)
+    room = c - lo
+    if not 0.0 < a <= room + 1e-12:
+        raise InputError(f"large_step must be in (0, {room:g}] m so that mid-stroke +- the step "
+                         f"stays within {margin:.0%}..{1 - margin:.0%} of the {L:g} m stroke; "
+                         f"got {a!r} m")
+    if not 0.0 < s <= 2.0 * a:
+        raise InputError(f"small_step must be in (0, {2 * a:g}] m, got {s!r} m")
+    if not (math.isfinite(hold) and hold > 0):
+        raise InputError(f"hold must be > 0 s, got {hold!r}")
+    if not (math.isfinite(start_hold) and start_hold >= 0):
+        raise InputError(f"start_hold must be >= 0 s, got {start_hold!r}")
+    if not (math.isfinite(v) and v > 0):
+        raise InputError(f"ramp_speed must be > 0 m/s, got {v!r}")
+
+    pts: list[tuple[float, float]] = [(0.0, c)]
+    t = start_hold
+    if start_hold > 0:
+        pts.append((t, c))
+    for level in (c + a, c - a, c - a + s, c - a):
+        pts.append((t, level))
+        t += hold
+        pts.append((t, level))
+    for target in (hi, lo):
+        t += abs(target - pts[-1][1]) / v
+        pts.append((t, target))
+        t += hold
+        pts.append((t, target))
+    return profile(pts)
