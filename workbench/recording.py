@@ -35,7 +35,7 @@ import numpy as np
 
 from .errors import InputError
 from .recording_io import KNOWN_COLUMNS, REQUIRED_COLUMNS, Where, read_csv, read_mat, write_atomic
-from .signals import fit, fit_signals
+from .signals import FIT_SIGNALS, fit, fit_signals
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -63,8 +63,6 @@ UNITS: Mapping[str, str] = MappingProxyType({
 PRESSURE_COLUMNS: tuple[str, ...] = ("p_a", "p_b", "p_s")
 #: Plausible absolute pressures in a pneumatic servodrive, Pa (formats.md section 3).
 PRESSURE_RANGE: tuple[float, float] = (2.0e4, 5.0e6)
-#: Signals compared by :func:`fit_signals` by default (the measured outputs).
-FIT_SIGNALS: tuple[str, ...] = ("x", "p_a", "p_b")
 
 _P_ATM = 101325.0  # Pa, standard atmosphere, offset of gauge pressures
 _SUFFIXES = {".csv": "csv", ".txt": "csv", ".mat": "mat"}

@@ -67,10 +67,12 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "noise_floor", "quantisation_step", "savgol", "smooth", "derivative", "odd_window",
-    "fit", "fit_signals", "CONFIDENCE_Z99", "WHITENESS_LEVEL", "correlation_band",
+    "fit", "fit_signals", "FIT_SIGNALS", "CONFIDENCE_Z99", "WHITENESS_LEVEL", "correlation_band",
     "autocorrelation", "cross_correlation", "ljung_box", "independence_test", "fraction_outside",
 ]
 
+#: Signals compared by :func:`fit_signals` by default (the measured outputs).
+FIT_SIGNALS: tuple[str, ...] = ("x", "p_a", "p_b")
 #: Two-sided 99 % quantile of the standard normal distribution: the confidence band
 #: of a normalised correlation estimated from N samples is +-2.58/sqrt(N).
 CONFIDENCE_Z99 = 2.5758293035489004
@@ -293,10 +295,9 @@ def fit_signals(measured: Recording, model: Recording | Mapping[str, Any],
         If a named signal is missing, the time bases differ, or a signal pair cannot be
         compared (see :func:`fit`).
     """
-    from .recording import FIT_SIGNALS, Recording
-    if not isinstance(measured, Recording):
+    if not (hasattr(measured, "data") and hasattr(measured, "sample_time")):
         raise TypeError(f"measured must be a Recording, not {type(measured).__name__}")
-    model_data = model.data if isinstance(model, Recording) else model
+    model_data = model if isinstance(model, Mapping) else model.data
     src = measured.source
     if "t" in model_data:
         tm = np.asarray(model_data["t"], dtype=float).ravel()
