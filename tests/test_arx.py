@@ -411,7 +411,8 @@ def test_cli_errors_exit_2(recording_csv, capsys, extra, message):
 
 
 def test_residual_tests_hold_their_level_and_see_colour_and_feedthrough():
-    """identify.residuals on its own: the 1 % level on white noise, power on coloured.
+    """The residual tests ARX uses (workbench.signals): the 1 % level on white noise,
+    power on coloured residuals and on an input feed-through.
 
     Level: 300 independent white series (N = 500, M = 20) are rejected by Ljung-Box
     at most 9 times, the 99.9 % quantile of Binomial(300, 0.01) (the chi-square
@@ -421,26 +422,25 @@ def test_residual_tests_hold_their_level_and_see_colour_and_feedthrough():
     0.3 at lag 2, N r^2 = 45 against chi-square(21): both must be rejected, while an
     independent residual is not.
     """
-    from workbench.identify.residuals import covariances, input_independence, ljung_box
+    from workbench.signals import WHITENESS_LEVEL, cross_correlation, independence_test, ljung_box
 
     rng = np.random.default_rng(11)
     n, m = 500, 20
     p_values, rejected = [], 0
     for _ in range(300):
         e = rng.standard_normal(n)
-        c_e, _, _, _ = covariances(e, rng.standard_normal(n), m)
-        _, _, p, ok = ljung_box(c_e, n)
+        _, p = ljung_box(e, m)
         p_values.append(p)
-        rejected += ok is False
+        rejected += p < WHITENESS_LEVEL
     assert rejected <= 9
     # p-values of a calibrated test are uniform: 150 +- 3 binomial std (26) below 0.5
     assert 124 <= np.sum(np.array(p_values) < 0.5) <= 176
     ar = lfilter([1.0], [1.0, -0.3], rng.standard_normal(n))
-    assert ljung_box(covariances(ar, rng.standard_normal(n), m)[0], n)[3] is False
+    assert ljung_box(ar, m)[1] < WHITENESS_LEVEL
     u = rng.standard_normal(n)
     for e, ok in ((rng.standard_normal(n), True),
                   (0.3 * np.r_[0.0, 0.0, u[:-2]] + rng.standard_normal(n), False)):
-        c_e, c_u, lags, c_eu = covariances(e, u, m)
-        r_eu, _, _, verdict = input_independence(c_e, c_u, c_eu, n)
-        assert verdict is ok
+        _, p, dof = independence_test(e, u, m)
+        assert (p >= WHITENESS_LEVEL) is ok and dof == m + 1
+        lags, r_eu = cross_correlation(e, u, m)
         assert lags.tolist() == list(range(-m, m + 1)) and r_eu.shape == (2 * m + 1,)

@@ -20,7 +20,7 @@ the one-sample delay of any sampled system) is ``orders=(4, 1, 2)`` here.
 
 Modules: :mod:`.model` (the model, :func:`fit_arx`), :mod:`.order` (:func:`select_order`),
 :mod:`.validation` (:func:`validate`); the residual tests themselves are in
-:mod:`workbench.identify.residuals`. Command line: :mod:`workbench.cli.identify`.
+:mod:`workbench.signals`. Command line: :mod:`workbench.cli.identify`.
 
 Closed-loop data: identifying the closed loop from the reference ``r`` to the position
 ``x`` (as paper 000 does) is an ordinary open-loop problem, because ``r`` is chosen by the
@@ -48,7 +48,8 @@ Examples
 
 from __future__ import annotations
 
-from ..residuals import CONFIDENCE_Z99, TEST_LEVEL
+from ...signals import CONFIDENCE_Z99
+from ...signals import WHITENESS_LEVEL as TEST_LEVEL
 from .model import ArxModel, fit_arx
 from .order import CRITERIA, OrderCandidate, OrderSelection, select_order
 from .validation import ArxValidation, validate

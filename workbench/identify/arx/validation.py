@@ -9,12 +9,18 @@ from typing import Any
 import numpy as np
 
 from ...errors import InputError
-from ..residuals import CONFIDENCE_Z99, covariances, input_independence, ljung_box
+from ...signals import (CONFIDENCE_Z99, WHITENESS_LEVEL, autocorrelation, cross_correlation,
+                        independence_test, ljung_box)
 from .checks import _data, _fit_percent, _order
 from .checks import finite_or_none as _num
 from .model import ArxModel, _ro
 
 __all__ = ["ArxValidation", "validate"]
+
+
+def _verdict(p: float) -> bool | None:
+    """Passed at the 1 % level (:data:`workbench.signals.WHITENESS_LEVEL`); None if undefined."""
+    return None if math.isnan(p) else p >= WHITENESS_LEVEL
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,9 +180,12 @@ def validate(model: ArxModel, y: Any, u: Any, lags: int = 25) -> ArxValidation:
     m = max(1, min(lag_max, n // 4))
     band = CONFIDENCE_Z99 / math.sqrt(n)
     lags = np.arange(m + 1)
-    c_e, c_u, cross_lags, c_eu = covariances(e, uu[n0:], m)
-    r_e, q, p_white, white_ok = ljung_box(c_e, n)
-    r_eu, s_ind, p_ind, ind_ok = input_independence(c_e, c_u, c_eu, n)
+    r_e = autocorrelation(e, m)
+    q, p_white = ljung_box(e, m)
+    cross_lags, r_eu = cross_correlation(e, uu[n0:], m)
+    s_ind, p_ind, _ = independence_test(e, uu[n0:], m)
+    white_ok = _verdict(p_white)
+    ind_ok = _verdict(p_ind)
     with np.errstate(invalid="ignore"):
         auto_out = int(np.sum(np.abs(r_e[1:]) > band))
         cross_out = int(np.sum(np.abs(r_eu) > band))
