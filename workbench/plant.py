@@ -309,7 +309,8 @@ class Plant:
 
     def _unpack(self, X, pv: Mapping[str, Any]) -> "_States":
         """The named quantities of the state vector ``X`` (in the order of
-        :func:`~workbench.plant_signals.state_signals`); where an effect is off, its quantity from the parameters ``pv``."""
+        :func:`~workbench.plant_signals.state_signals`); where an effect is off, its
+        quantity from the parameters ``pv`` (the gas temperature, the set pressure)."""
         prm = self.params
         s = _States(x=X[0], v=X[1], p_a=X[2], p_b=X[3], t_a=pv["gas.temperature"],
                     t_b=pv["gas.temperature"], p_s=pv["supply.pressure"])
