@@ -524,6 +524,22 @@ def test_summary_reports_the_valve_law():
     assert "input_affine" in repr(aff)
 
 
+
+def test_summary_chamber_volumes_are_the_full_stroke_volumes(tmp_path):
+    """V_max of each chamber: its dead volume plus its piston area times the stroke,
+    written out from the file's numbers (bore 25 mm, rod 10 mm, stroke 0.5 m,
+    dead 5 cm^3). A handful of roundings in each: 1e-14 relative."""
+    plant = Plant.from_toml(write_plant(tmp_path / "p.toml", (), {"cylinder.rod_diameter": 0.01}))
+    s = plant.summary()
+    assert s["volume_a_max_m3"] == pytest.approx(5e-6 + math.pi / 4 * 0.025 ** 2 * 0.5, rel=1e-14)
+    assert s["volume_b_max_m3"] == pytest.approx(
+        5e-6 + math.pi / 4 * (0.025 ** 2 - 0.01 ** 2) * 0.5, rel=1e-14)
+    # The chambers at the ends of the stroke, seen through chamber_masses: the
+    # full chamber holds p V / (r T) of gas.
+    m_a, _ = plant.chamber_masses([0.5, 0.0, 3e5, 3e5])
+    assert m_a == pytest.approx(3e5 * s["volume_a_max_m3"] / (gas.R_AIR * 293.15), rel=1e-14)
+
+
 # ====================================================================== signal semantics
 #: Unit of each kind of signal (SI), written out here so the test checks the package.
 _KIND_UNITS = {"position": "m", "velocity": "m/s", "pressure": "Pa", "temperature": "K",

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import casadi as ca
@@ -37,92 +37,11 @@ import numpy as np
 from . import equilibrium
 from .params import SCHEMA, PlantParams
 from .physics import chamber, friction, gas, line, piston, supply, valve
+from .plant_signals import (FLOW_SCALE, INPUT_SIGNALS, KINDS, OUTPUT_SIGNALS, PRESSURE_SCALE,
+                            VELOCITY_SCALE, Signal, state_signals, valued)
 
 __all__ = ["Signal", "Plant", "OUTPUT_SIGNALS", "KINDS", "PRESSURE_SCALE", "VELOCITY_SCALE",
            "FLOW_SCALE"]
-
-
-#: Kinds of signal, each with its SI unit (:attr:`Signal.kind`).
-KINDS: dict[str, str] = {
-    "position": "m", "velocity": "m/s", "pressure": "Pa", "temperature": "K",
-    "mass_flow": "kg/s", "force": "N", "command": "V", "spool": "V", "spool_rate": "V/s",
-}
-
-#: Scale of every pressure, Pa: 1 bar, the resolution at which a rig engineer reads them.
-PRESSURE_SCALE = 1e5
-#: Scale of the piston velocity, m/s: the order of a servo-pneumatic drive's top speed.
-VELOCITY_SCALE = 1.0
-#: Scale of every mass flow, kg/s: 1 g/s (~50 l/min ANR), the order of a servo valve's
-#: flow near its centre (a fully open valve passes 4-40 g/s on the reference plants).
-FLOW_SCALE = 1e-3
-
-
-@dataclass(frozen=True)
-class Signal:
-    """Name, SI unit and meaning of a state, input or output.
-
-    Attributes
-    ----------
-    name : str
-    unit : str
-        SI unit (that of :data:`KINDS` for its kind).
-    doc : str
-    kind : str
-        What it measures, a key of :data:`KINDS` (``"position"``, ``"pressure"``, ...).
-    scale : float
-        Its typical magnitude for this plant, in ``unit``: **the magnitude used to
-        scale tolerances and residuals** (integrator tolerances, equilibrium
-        residuals, least-squares weights, finite-difference steps). Stroke for the
-        position, :data:`VELOCITY_SCALE`, :data:`PRESSURE_SCALE`, :data:`FLOW_SCALE`,
-        the gas temperature for temperatures, the command span for the command and
-        spool, span x 2 pi x bandwidth for the spool rate, the full-supply force on
-        side a for forces.
-    rest : float
-        Its value at rest for the nominal parameters, in ``unit``: mid-stroke, zero
-        velocity and flows, chamber and line pressures at the centre balance of the
-        valve (:func:`workbench.equilibrium.rest_pressure`), temperatures the gas
-        temperature, the command and spool the valve centre
-        (``command_center + null_offset``), the supply its set pressure.
-    part : str
-        Part of the drive: ``"piston"``, ``"chamber"``, ``"line"``, ``"valve"`` or ``"supply"``.
-    effect : str
-        The effect that adds this state (``"valve_dynamics"``, ``"heat_transfer"``,
-        ``"line_dynamics"``, ``"supply_droop"``); ``""`` for the basic drive's
-        signals (x, v, p_a, p_b, the command, the outputs).
-    follows : str
-        Name of the state or input whose value this one takes at rest
-        (``"p_a"`` for the nodes of line a, ``"u"`` for the spool), or ``""``.
-    rest_key : str
-        Plant-file key whose value is the rest value (``"gas.temperature"``,
-        ``"supply.pressure"``), or ``""``.
-    """
-
-    name: str
-    unit: str
-    doc: str = ""
-    kind: str = ""
-    scale: float = 1.0
-    rest: float = 0.0
-    part: str = ""
-    effect: str = ""
-    follows: str = ""
-    rest_key: str = ""
-
-
-#: Outputs of every plant, in the order of ``h`` (names, units and meanings; a
-#: plant's :attr:`Plant.outputs` carry its scales and rest values as well).
-OUTPUT_SIGNALS: tuple[Signal, ...] = (
-    Signal("x", "m", "piston position", "position", part="piston"),
-    Signal("v", "m/s", "piston velocity", "velocity", part="piston"),
-    Signal("p_a", "Pa", "pressure in chamber a", "pressure", part="chamber"),
-    Signal("p_b", "Pa", "pressure in chamber b", "pressure", part="chamber"),
-    Signal("p_s", "Pa", "supply pressure at the valve", "pressure", part="supply",
-           rest_key="supply.pressure"),
-    Signal("q_supply", "kg/s", "mass flow drawn from the supply", "mass_flow", part="supply"),
-    Signal("force", "N", "net pneumatic force on the piston", "force", part="piston"),
-)
-
-_INPUTS = (Signal("u", "V", "valve command", "command", part="valve"),)
 
 
 class Plant:
@@ -179,8 +98,8 @@ class Plant:
         if params.has_effect("line_dynamics"):
             self.segments = int(params.get("lines.segments")
                                 or line.default_segments(params["lines.length"]))
-        self.states = self._valued(self._state_signals())
-        self.inputs = self._valued(_INPUTS)
+        self.states = self._valued(state_signals(params, self.segments))
+        self.inputs = self._valued(INPUT_SIGNALS)
         self.outputs = self._valued(OUTPUT_SIGNALS)
         nx, npar = len(self.states), len(self.param_names)
         self.x_sym = ca.SX.sym("x", nx)
@@ -246,57 +165,9 @@ class Plant:
             raise KeyError(f"no parameter '{name}' in this plant; parameters: "
                            f"{', '.join(self.param_names)}") from None
 
-    def _state_signals(self) -> tuple[Signal, ...]:
-        """The state signals (kind, part, effect, rest rule); scales and rests are
-        filled in by :meth:`_valued`."""
-        s = [Signal("x", "m", "piston position", "position", part="piston"),
-             Signal("v", "m/s", "piston velocity", "velocity", part="piston"),
-             Signal("p_a", "Pa", "pressure in chamber a", "pressure", part="chamber"),
-             Signal("p_b", "Pa", "pressure in chamber b", "pressure", part="chamber")]
-        prm = self.params
-        if prm.has_effect("valve_dynamics"):
-            eff = "valve_dynamics"
-            s += [Signal("spool", "V", "command the spool currently follows", "spool",
-                         part="valve", effect=eff, follows="u"),
-                  Signal("spool_rate", "V/s", "its rate", "spool_rate", part="valve",
-                         effect=eff)]
-        if prm.has_effect("heat_transfer"):
-            s += [Signal(f"T_{c}", "K", f"gas temperature in chamber {c}", "temperature",
-                         part="chamber", effect="heat_transfer", rest_key="gas.temperature")
-                  for c in ("a", "b")]
-        for side in ("a", "b"):
-            s += [Signal(f"line_{side}_p{j}", "Pa", f"pressure of line {side} node {j}",
-                         "pressure", part="line", effect="line_dynamics", follows=f"p_{side}")
-                  for j in range(self.segments)]
-            s += [Signal(f"line_{side}_q{j}", "kg/s", f"mass flow of line {side} segment {j}",
-                         "mass_flow", part="line", effect="line_dynamics")
-                  for j in range(self.segments)]
-        if prm.has_effect("supply_droop"):
-            s += [Signal("p_s", "Pa", "reservoir (supply) pressure", "pressure", part="supply",
-                         effect="supply_droop", rest_key="supply.pressure")]
-        return tuple(s)
-
     def _valued(self, signals: Sequence[Signal]) -> tuple[Signal, ...]:
         """``signals`` with this plant's scale and rest value (see :class:`Signal`)."""
-        prm = self.params
-        span = float(prm["valve.command_span"])
-        centre = float(prm["valve.command_center"]) + float(prm.get("valve.null_offset", 0.0))
-        p_s, p_atm = float(prm["supply.pressure"]), float(prm["gas.atmospheric_pressure"])
-        p_rest = equilibrium.rest_pressure(prm)
-        scale = {"position": self.stroke, "velocity": VELOCITY_SCALE,
-                 "pressure": PRESSURE_SCALE, "temperature": float(prm["gas.temperature"]),
-                 "mass_flow": FLOW_SCALE, "force": (p_s - p_atm) * self.area_a,
-                 "command": span, "spool": span}
-        if prm.has_effect("valve_dynamics"):
-            scale["spool_rate"] = span * 2.0 * math.pi * float(prm["valve.bandwidth"])
-        rest = {"position": 0.5 * self.stroke, "pressure": p_rest, "command": centre,
-                "spool": centre,
-                "force": piston.pneumatic_force(p_rest, p_rest, self.area_a, self.area_b, p_atm)}
-        out = []
-        for sig in signals:
-            value = float(prm[sig.rest_key]) if sig.rest_key else rest.get(sig.kind, 0.0)
-            out.append(replace(sig, scale=float(scale[sig.kind]), rest=float(value)))
-        return tuple(out)
+        return valued(self.params, signals, self.stroke, self.area_a, self.area_b)
 
     def signal(self, name: str) -> Signal:
         """The state, output or input called ``name`` (a state first: ``p_s`` is both a
@@ -389,138 +260,77 @@ class Plant:
 
     # ---------------------------------------------------------------- the model
     def _build(self, X, U, P, friction_form: str, underlap: float):
+        """State derivative and outputs as expressions of ``X``, ``U``, ``P``.
+
+        One step per physical part, each a function below: the spool, the valve's
+        port flows, the lines, the leaks, the chambers, the piston and the supply.
+
+        Parameters
+        ----------
+        X, U, P : casadi.SX
+            State (SI, :attr:`states` order), command (V) and parameters (:attr:`param_names`).
+        friction_form : {"stick", "smooth"}
+            Dry-friction form (with the ``dry_friction`` effect).
+        underlap : float
+            Leak of every valve edge, fraction of full opening (0 for the real valve).
+
+        Returns
+        -------
+        (xdot, y) : casadi.SX
+        """
         prm = self.params
         pv = {n: P[i] for i, n in enumerate(self.param_names)}
-        T = pv["gas.temperature"]
-        k = pv["gas.polytropic_index"]
-        p_atm = pv["gas.atmospheric_pressure"]
-        bore = pv["cylinder.bore"]
-        rod = pv["cylinder.rod_diameter"]
-        area_a = ca.pi / 4.0 * bore ** 2
-        area_b = ca.pi / 4.0 * (bore ** 2 - rod ** 2)
-        L = pv["cylinder.stroke"]
-        m = pv["load.mass"]
-
-        x, v, p_a, p_b = X[0], X[1], X[2], X[3]
-        i = 4
-        u = U[0]
+        s = self._unpack(X, pv)
+        area_a, area_b = _areas(pv)
         derivs: dict[str, Any] = {}
-        if prm.has_effect("valve_dynamics"):
-            y_sp, y_sp_dot = X[i], X[i + 1]
-            i += 2
-            d1, d2 = valve.spool_dynamics(y_sp, y_sp_dot, u, pv["valve.bandwidth"],
-                                          pv["valve.damping"])
-            derivs["spool"], derivs["spool_rate"] = d1, d2
-            u_spool = y_sp
-        else:
-            u_spool = u
-        heat = prm.has_effect("heat_transfer")
-        if heat:
-            t_a, t_b = X[i], X[i + 1]
-            i += 2
-        else:
-            t_a = t_b = T
-        n = self.segments
-        if n:
-            la_p = [X[i + j] for j in range(n)]
-            la_q = [X[i + n + j] for j in range(n)]
-            lb_p = [X[i + 2 * n + j] for j in range(n)]
-            lb_q = [X[i + 3 * n + j] for j in range(n)]
-            i += 4 * n
-        if prm.has_effect("supply_droop"):
-            p_s = X[i]
-            i += 1
-        else:
-            p_s = pv["supply.pressure"]
-
-        offset = pv["valve.null_offset"] if "valve.null_offset" in pv else 0.0
-        deadband = pv["valve.deadband"] if "valve.deadband" in pv else 0.0
-        s = valve.spool_position(u_spool, pv["valve.command_center"],
-                                 pv["valve.command_span"], offset)
-        opening = valve.effective_opening(s, deadband)
-        port_a, port_b = (la_p[0], lb_p[0]) if n else (p_a, p_b)
-        port_ta, port_tb = (T, T) if n else (t_a, t_b)
-        if self.valve_law == "input_affine":
-            # Paper 003's approximation II at both ports (port b mirrored); it does
-            # not see the supply pressure or the gas temperatures, and its supply
-            # draw is the inflow part max(q_a, 0) + max(q_b, 0).
-            coeffs = {name: [pv[f"valve.{name}[{j}]"] for j in range(len(prm[f"valve.{name}"]))]
-                      for name in ("affine_phi", "affine_psi_in", "affine_psi_out",
-                                   "affine_gamma")}
-            q_va, q_vb, q_sup = valve.affine_port_flows(
-                opening, port_a, port_b, coeffs["affine_phi"], coeffs["affine_psi_in"],
-                coeffs["affine_psi_out"], coeffs["affine_gamma"], underlap=underlap)
-        else:
-            q_va, q_vb, q_sup = valve.four_edge_flows(
-                opening, p_s, port_a, port_b, p_atm, pv["valve.sonic_conductance"],
-                pv["valve.critical_pressure_ratio"], T, port_ta, port_tb, underlap,
-                underlap_law=prm["valve.underlap_law"])
-
-        if n:
-            length, diam = pv["lines.length"], pv["lines.diameter"]
-            dpa, dqa = line.line_rates(la_p, la_q, q_va, p_a, length, diam, T)
-            dpb, dqb = line.line_rates(lb_p, lb_q, q_vb, p_b, length, diam, T)
-            q_a, q_b = la_q[-1], lb_q[-1]
-        else:
-            q_a, q_b = q_va, q_vb
-
-        leak_a = leak_b = cross = 0.0
-        if "leakage.conductance_to_atmosphere" in pv:
-            c_leak = pv["leakage.conductance_to_atmosphere"]
-            leak_a = supply.leak_to_atmosphere(p_a, p_atm, c_leak, t_a)
-            leak_b = supply.leak_to_atmosphere(p_b, p_atm, c_leak, t_b)
-        if "leakage.cross_piston" in pv:
-            cross = supply.cross_piston_leak(p_a, p_b, pv["leakage.cross_piston"])
-
-        v_a, v_b, dv_a, dv_b = chamber.volumes(x, v, area_a, area_b, L,
-                                               pv["cylinder.dead_volume_a"],
-                                               pv["cylinder.dead_volume_b"])
-        if heat:
-            h = pv["gas.heat_transfer_coefficient"]
-
-            def split(q):
-                return ca.fmax(q, 0.0), ca.fmax(-q, 0.0)
-
-            qa_in, qa_out = split(q_a)
-            qb_in, qb_out = split(q_b)
-            xa_in, xa_out = split(-cross)   # cross > 0: a -> b
-            xb_in, xb_out = split(cross)
-            tq_a = T * qa_in + t_b * xa_in
-            tq_b = T * qb_in + t_a * xb_in
-            dp_a, dt_a = chamber.pressure_temperature_rates(
-                p_a, t_a, v_a, dv_a, tq_a, qa_in + xa_in, qa_out + xa_out + leak_a, h, T)
-            dp_b, dt_b = chamber.pressure_temperature_rates(
-                p_b, t_b, v_b, dv_b, tq_b, qb_in + xb_in, qb_out + xb_out + leak_b, h, T)
-            derivs["T_a"], derivs["T_b"] = dt_a, dt_b
-        else:
-            dp_a = chamber.pressure_rate(p_a, v_a, dv_a, q_a - leak_a - cross, k, T)
-            dp_b = chamber.pressure_rate(p_b, v_b, dv_b, q_b - leak_b + cross, k, T)
-
-        force = piston.pneumatic_force(p_a, p_b, area_a, area_b, p_atm)
-        drive = force - pv["load.external_force"] + piston.end_stop_force(x, v, L, m)
-        beta = pv["load.viscous_friction"]
-        if prm.has_effect("dry_friction"):
-            fc, fs, vs = (pv["friction.coulomb"], pv["friction.static"],
-                          pv["friction.stribeck_velocity"])
-            if friction_form == "stick":
-                acc = friction.stick_slip_acceleration(v, drive, m, beta, fc, fs, vs)
-            else:
-                acc = (drive - friction.smooth_friction(v, fc, fs, vs, beta)) / m
-        else:
-            acc = (drive - beta * v) / m
-
-        if n:
-            for j in range(n):
-                derivs[f"line_a_p{j}"], derivs[f"line_a_q{j}"] = dpa[j], dqa[j]
-                derivs[f"line_b_p{j}"], derivs[f"line_b_q{j}"] = dpb[j], dqb[j]
+        u_valve = U[0]
+        if s.spool is not None:
+            derivs["spool"], derivs["spool_rate"] = valve.spool_dynamics(
+                s.spool, s.spool_rate, U[0], pv["valve.bandwidth"], pv["valve.damping"])
+            u_valve = s.spool
+        q_va, q_vb, q_sup = _valve_flows(prm, s, pv, _opening(u_valve, pv), underlap)
+        q_a, q_b = _line_flows(s, q_va, q_vb, pv, derivs)
+        leaks = _leaks(s, pv)
+        dp_a, dp_b = _chamber_rates(s, q_a, q_b, leaks, area_a, area_b, pv, derivs,
+                                    heat=prm.has_effect("heat_transfer"))
+        force = piston.pneumatic_force(s.p_a, s.p_b, area_a, area_b,
+                                       pv["gas.atmospheric_pressure"])
+        dry = friction_form if prm.has_effect("dry_friction") else None
+        acc = _acceleration(s, force, pv, dry)
         if prm.has_effect("supply_droop"):
             derivs["p_s"] = supply.reservoir_rate(
-                p_s, pv["supply.pressure"], pv["supply.regulator_conductance"],
-                pv["supply.reservoir_volume"], q_sup, T, k=k)
-        derivs.update(x=v, v=acc, p_a=dp_a, p_b=dp_b)
-        xdot = ca.vertcat(*[derivs[s_.name] for s_ in self.states])
-        y = ca.vertcat(x, v, p_a, p_b, p_s, q_sup, force)
+                s.p_s, pv["supply.pressure"], pv["supply.regulator_conductance"],
+                pv["supply.reservoir_volume"], q_sup, pv["gas.temperature"],
+                k=pv["gas.polytropic_index"])
+        derivs.update(x=s.v, v=acc, p_a=dp_a, p_b=dp_b)
+        xdot = ca.vertcat(*[derivs[sig.name] for sig in self.states])
+        y = ca.vertcat(s.x, s.v, s.p_a, s.p_b, s.p_s, q_sup, force)
         return xdot, y
+
+    def _unpack(self, X, pv: Mapping[str, Any]) -> "_States":
+        """The named quantities of the state vector ``X`` (in the order of
+        :func:`~workbench.plant_signals.state_signals`); where an effect is off, its
+        quantity from the parameters ``pv`` (the gas temperature, the set pressure)."""
+        prm = self.params
+        s = _States(x=X[0], v=X[1], p_a=X[2], p_b=X[3], t_a=pv["gas.temperature"],
+                    t_b=pv["gas.temperature"], p_s=pv["supply.pressure"])
+        i = 4
+        if prm.has_effect("valve_dynamics"):
+            s.spool, s.spool_rate = X[i], X[i + 1]
+            i += 2
+        if prm.has_effect("heat_transfer"):
+            s.t_a, s.t_b = X[i], X[i + 1]
+            i += 2
+        n = self.segments
+        if n:
+            s.line_a_p = [X[i + j] for j in range(n)]
+            s.line_a_q = [X[i + n + j] for j in range(n)]
+            s.line_b_p = [X[i + 2 * n + j] for j in range(n)]
+            s.line_b_q = [X[i + 3 * n + j] for j in range(n)]
+            i += 4 * n
+        if prm.has_effect("supply_droop"):
+            s.p_s = X[i]
+        return s
 
     def regularised_f(self, underlap: float) -> ca.Function:
         """``f`` of a valve whose every edge leaks ``underlap`` (fraction of full opening).
@@ -605,13 +415,18 @@ class Plant:
         prm = self.params
         p_s, p_atm = prm["supply.pressure"], prm["gas.atmospheric_pressure"]
         q_full = self.full_opening_flow()
+        dead_a, dead_b = prm["cylinder.dead_volume_a"], prm["cylinder.dead_volume_b"]
+        v_a_max = chamber.volumes(self.stroke, 0.0, self.area_a, self.area_b, self.stroke,
+                                  dead_a, dead_b)[0]          # piston at x = stroke
+        v_b_max = chamber.volumes(0.0, 0.0, self.area_a, self.area_b, self.stroke,
+                                  dead_a, dead_b)[1]          # piston at x = 0
         return {
             "name": self.name,
             "area_a_m2": self.area_a,
             "area_b_m2": self.area_b,
             "stroke_m": self.stroke,
-            "volume_a_max_m3": prm["cylinder.dead_volume_a"] + self.area_a * self.stroke,
-            "volume_b_max_m3": prm["cylinder.dead_volume_b"] + self.area_b * self.stroke,
+            "volume_a_max_m3": v_a_max,
+            "volume_b_max_m3": v_b_max,
             "max_force_extend_N": (p_s - p_atm) * self.area_a,
             "max_force_retract_N": (p_s - p_atm) * self.area_b,
             "valve_law": self.valve_law,
@@ -627,3 +442,148 @@ class Plant:
         eff = ", ".join(self.effects) or "no effects"
         law = "" if self.valve_law == "iso6358" else f", valve law {self.valve_law}"
         return f"Plant({self.name!r}, {len(self.states)} states, {eff}{law})"
+
+
+# ---------------------------------------------------------------------- the model, part by part
+@dataclass
+class _States:
+    """Symbolic quantities of one state vector, by meaning (see :meth:`Plant._unpack`).
+
+    x (m), v (m/s), p_a, p_b (Pa); the spool and its rate (V, V/s; None without
+    valve dynamics); the chamber temperatures t_a, t_b (K; the gas temperature
+    without heat transfer); the node pressures (Pa) and segment flows (kg/s) of
+    lines a and b (empty without line dynamics); the supply pressure p_s (Pa; the
+    set pressure without supply droop).
+    """
+
+    x: Any
+    v: Any
+    p_a: Any
+    p_b: Any
+    t_a: Any
+    t_b: Any
+    p_s: Any
+    spool: Any = None
+    spool_rate: Any = None
+    line_a_p: list = field(default_factory=list)
+    line_a_q: list = field(default_factory=list)
+    line_b_p: list = field(default_factory=list)
+    line_b_q: list = field(default_factory=list)
+
+
+def _areas(pv: Mapping[str, Any]):
+    """Piston areas (m^2) on sides a and b from the bore and rod diameter."""
+    bore, rod = pv["cylinder.bore"], pv["cylinder.rod_diameter"]
+    return ca.pi / 4.0 * bore ** 2, ca.pi / 4.0 * (bore ** 2 - rod ** 2)
+
+
+def _opening(u_valve, pv: Mapping[str, Any]):
+    """Effective valve opening (-1..1) for the command the spool follows, V
+    (null offset and deadband when the plant has them)."""
+    offset = pv["valve.null_offset"] if "valve.null_offset" in pv else 0.0
+    deadband = pv["valve.deadband"] if "valve.deadband" in pv else 0.0
+    s = valve.spool_position(u_valve, pv["valve.command_center"], pv["valve.command_span"],
+                             offset)
+    return valve.effective_opening(s, deadband)
+
+
+def _valve_flows(prm: PlantParams, s: _States, pv: Mapping[str, Any], opening, underlap: float):
+    """Mass flows (kg/s) out of the valve into ports a and b, and drawn from the supply.
+
+    The ports are the chambers, or the first nodes of the lines (at the gas
+    temperature) with line dynamics. ``[valve] law`` selects four ISO 6358 edges or
+    paper 003's input-affine law.
+    """
+    T = pv["gas.temperature"]
+    lines = bool(s.line_a_p)
+    port_a, port_b = (s.line_a_p[0], s.line_b_p[0]) if lines else (s.p_a, s.p_b)
+    port_ta, port_tb = (T, T) if lines else (s.t_a, s.t_b)
+    if prm["valve.law"] == "input_affine":
+        # Paper 003's approximation II at both ports (port b mirrored); it does
+        # not see the supply pressure or the gas temperatures, and its supply
+        # draw is the inflow part max(q_a, 0) + max(q_b, 0).
+        coeffs = {name: [pv[f"valve.{name}[{j}]"] for j in range(len(prm[f"valve.{name}"]))]
+                  for name in ("affine_phi", "affine_psi_in", "affine_psi_out",
+                               "affine_gamma")}
+        return valve.affine_port_flows(
+            opening, port_a, port_b, coeffs["affine_phi"], coeffs["affine_psi_in"],
+            coeffs["affine_psi_out"], coeffs["affine_gamma"], underlap=underlap)
+    return valve.four_edge_flows(
+        opening, s.p_s, port_a, port_b, pv["gas.atmospheric_pressure"],
+        pv["valve.sonic_conductance"], pv["valve.critical_pressure_ratio"], T, port_ta,
+        port_tb, underlap, underlap_law=prm["valve.underlap_law"])
+
+
+def _line_flows(s: _States, q_va, q_vb, pv: Mapping[str, Any], derivs: dict):
+    """Mass flows (kg/s) into chambers a and b: the valve's own without line
+    dynamics, else the last segment's of each line, whose node and segment rates
+    go into ``derivs``."""
+    if not s.line_a_p:
+        return q_va, q_vb
+    length, diam, T = pv["lines.length"], pv["lines.diameter"], pv["gas.temperature"]
+    dpa, dqa = line.line_rates(s.line_a_p, s.line_a_q, q_va, s.p_a, length, diam, T)
+    dpb, dqb = line.line_rates(s.line_b_p, s.line_b_q, q_vb, s.p_b, length, diam, T)
+    for j in range(len(s.line_a_p)):
+        derivs[f"line_a_p{j}"], derivs[f"line_a_q{j}"] = dpa[j], dqa[j]
+        derivs[f"line_b_p{j}"], derivs[f"line_b_q{j}"] = dpb[j], dqb[j]
+    return s.line_a_q[-1], s.line_b_q[-1]
+
+
+def _leaks(s: _States, pv: Mapping[str, Any]):
+    """(leak_a, leak_b, cross), kg/s: leaks from chambers a and b to atmosphere and
+    across the piston (cross > 0: a -> b); zero for the keys the plant lacks."""
+    leak_a = leak_b = cross = 0.0
+    if "leakage.conductance_to_atmosphere" in pv:
+        c_leak, p_atm = pv["leakage.conductance_to_atmosphere"], pv["gas.atmospheric_pressure"]
+        leak_a = supply.leak_to_atmosphere(s.p_a, p_atm, c_leak, s.t_a)
+        leak_b = supply.leak_to_atmosphere(s.p_b, p_atm, c_leak, s.t_b)
+    if "leakage.cross_piston" in pv:
+        cross = supply.cross_piston_leak(s.p_a, s.p_b, pv["leakage.cross_piston"])
+    return leak_a, leak_b, cross
+
+
+def _chamber_rates(s: _States, q_a, q_b, leaks, area_a, area_b, pv: Mapping[str, Any],
+                   derivs: dict, heat: bool):
+    """Pressure rates (Pa/s) of chambers a and b for the inflows ``q_a``, ``q_b``
+    (kg/s) less ``leaks`` (:func:`_leaks`); with ``heat`` (transfer to the walls) their
+    temperature rates (K/s) go into ``derivs``, else the gas is polytropic."""
+    leak_a, leak_b, cross = leaks
+    T, k = pv["gas.temperature"], pv["gas.polytropic_index"]
+    v_a, v_b, dv_a, dv_b = chamber.volumes(s.x, s.v, area_a, area_b, pv["cylinder.stroke"],
+                                           pv["cylinder.dead_volume_a"],
+                                           pv["cylinder.dead_volume_b"])
+    if not heat:
+        dp_a = chamber.pressure_rate(s.p_a, v_a, dv_a, q_a - leak_a - cross, k, T)
+        dp_b = chamber.pressure_rate(s.p_b, v_b, dv_b, q_b - leak_b + cross, k, T)
+        return dp_a, dp_b
+    h = pv["gas.heat_transfer_coefficient"]
+
+    def split(q):
+        return ca.fmax(q, 0.0), ca.fmax(-q, 0.0)
+
+    qa_in, qa_out = split(q_a)
+    qb_in, qb_out = split(q_b)
+    xa_in, xa_out = split(-cross)   # cross > 0: a -> b
+    xb_in, xb_out = split(cross)
+    tq_a = T * qa_in + s.t_b * xa_in
+    tq_b = T * qb_in + s.t_a * xb_in
+    dp_a, derivs["T_a"] = chamber.pressure_temperature_rates(
+        s.p_a, s.t_a, v_a, dv_a, tq_a, qa_in + xa_in, qa_out + xa_out + leak_a, h, T)
+    dp_b, derivs["T_b"] = chamber.pressure_temperature_rates(
+        s.p_b, s.t_b, v_b, dv_b, tq_b, qb_in + xb_in, qb_out + xb_out + leak_b, h, T)
+    return dp_a, dp_b
+
+
+def _acceleration(s: _States, force, pv: Mapping[str, Any], dry_friction: str | None):
+    """Piston acceleration, m/s^2: pneumatic ``force`` (N) less the external load,
+    the end stops' force, viscous friction and, with ``dry_friction`` (its form,
+    ``"stick"`` or ``"smooth"``), Coulomb/Stribeck friction."""
+    L, m, beta = pv["cylinder.stroke"], pv["load.mass"], pv["load.viscous_friction"]
+    drive = force - pv["load.external_force"] + piston.end_stop_force(s.x, s.v, L, m)
+    if dry_friction is None:
+        return (drive - beta * s.v) / m
+    fc, fs, vs = (pv["friction.coulomb"], pv["friction.static"],
+                  pv["friction.stribeck_velocity"])
+    if dry_friction == "stick":
+        return friction.stick_slip_acceleration(s.v, drive, m, beta, fc, fs, vs)
+    return (drive - friction.smooth_friction(s.v, fc, fs, vs, beta)) / m
