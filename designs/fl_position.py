@@ -390,7 +390,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         html, pdf = rp.write(doc, out)
         summary = {"design_passed": design_ok, "fl_full_passed": bool(fl_full_ok),
                    "bandwidth": BANDWIDTH, "damping": DAMPING, "gains": fl.gains,
-                   "feasibility": d.as_dict(), "refused": refused,
+                   "feasibility": d.to_dict(), "refused": refused,
                    "must_show": {"worst_fraction": worst, "bound": TRACKING_BOUND,
                                  "steps": [{"start": r[0], "size": r[1], "max_error": r[2],
                                             "fraction": r[3]} for r in rows_ms]},

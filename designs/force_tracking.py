@@ -224,7 +224,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         plans = {rule: pressure_plan(model, tp, profile, x=X_LOCK, rule=rule) for rule in PLAN_RULES}
         rows = []
         for rule, plan in plans.items():
-            s = plan.summary()
+            s = plan.to_dict()
             rows.append([rule, s["p_min"] / 1e5, s["p_max"] / 1e5, s["level_min"] / 1e5,
                          s["level_max"] / 1e5, s["q_max"] * 1e3, s["air_mass"] * 1e3,
                          s["command_mismatch"], "yes" if s["command_mismatch"] < 1e-6 else "no (two valves)",
@@ -439,7 +439,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "span": span, "bounds": {"max": MAX_ERROR_FRACTION * span,
                                             "rms": RMS_ERROR_FRACTION * span},
                    "metrics": mets, "errors": errors, "plan_deviation": plan_dev,
-                   "plans": {k: p.summary() for k, p in plans.items()},
+                   "plans": {k: p.to_dict() for k, p in plans.items()},
                    "robustness": {"spec": judge.bounds, "hold_settle": HOLD_SETTLE,
                                   "run_time": t_mc,
                                   "nominal": {f"{c} | {pn}": {"passed": o.passed,

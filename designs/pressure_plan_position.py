@@ -247,7 +247,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         plans = {rule: pressure_plan(model, tp, force, x=xp, v=vp, rule=rule) for rule in PLAN_RULES}
         rows, plan_sum = [], {}
         for rule, plan in plans.items():
-            s = plan.summary()
+            s = plan.to_dict()
             k = stiffness(model, xp, plan.p_a, plan.p_b)
             s["stiffness_min"] = float(k.min())
             s["stiffness_max"] = float(k.max())

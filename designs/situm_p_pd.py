@@ -367,7 +367,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         html, pdf = rp.write(doc, out)
         summary = {"design_passed": bool(design_ok), "k0_p": lim_rig.k0, "kp_pd": kp_pd,
                    "kd_pd": kd_pd, "k0_pd": k0_pd,
-                   "limits_table_ii": lim_paper.as_dict(), "limits_rig": lim_rig.as_dict(),
+                   "limits_table_ii": lim_paper.to_dict(), "limits_rig": lim_rig.to_dict(),
                    "rho_p": float(rho_p), "rho_pd": float(rho_pd),
                    "map_crossing_k0": float(cross),
                    "validation_p": v_p.to_dict(), "validation_pd": v_pd.to_dict(),

@@ -73,7 +73,7 @@ def main(argv=None) -> int:
         "plant": str(PLANT.relative_to(HERE.parent)),
         "operating_point": {"x": op.x, "u": op.u, "p_a": op.p_a, "p_b": op.p_b},
         "paper000_formulas": {"w0": w0_paper, "zeta": zeta_paper},
-        "exact_linearisation": red.as_dict(),
+        "exact_linearisation": red.to_dict(),
         "loop_gain_k0": k0,
         "simulation": {"duration_s": float(ref.duration), "wall_s": wall,
                        "max_abs_error_m": float(np.max(np.abs(err))),

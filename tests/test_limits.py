@@ -226,11 +226,11 @@ def test_gain_limits_rejects_bad_input(kwargs, word):
         stability.gain_limits(**args)
 
 
-def test_result_is_immutable_and_as_dict_has_the_keys():
+def test_result_is_immutable_and_to_dict_has_the_keys():
     lim = stability.gain_limits(W0, ZETA, T, k0=K0)
     with pytest.raises(AttributeError):
         lim.sampled = 1.0
-    d = lim.as_dict()
+    d = lim.to_dict()
     assert {"k0", "continuous", "pct", "sampled", "sampled_delay", "gain_margin",
             "phase_margin_deg"} <= set(d)
     no_k0 = stability.gain_limits(W0, ZETA, T)

@@ -67,10 +67,12 @@ class OperatingPoint:
     residual: float
     state_names: tuple[str, ...] = ()
 
-    def as_dict(self) -> dict:
-        return {"x": self.x, "u": self.u, "p_a": self.p_a, "p_b": self.p_b,
+    def to_dict(self) -> dict:
+        """JSON-ready dict (SI): x, u, p_a, p_b, the state by name, the residual."""
+        return {"x": float(self.x), "u": float(self.u), "p_a": float(self.p_a),
+                "p_b": float(self.p_b),
                 "state": dict(zip(self.state_names, map(float, self.state))),
-                "residual": self.residual}
+                "residual": float(self.residual)}
 
 
 def centre_balance_pressure(p_s: float, p_atm: float, b: float, t: float = gas.T_REF) -> float:

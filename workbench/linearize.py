@@ -78,6 +78,18 @@ class TangentModel:
             out[k] = (c @ np.linalg.solve(1j * w * np.eye(n) - self.A, self.B) + d)[0, 0]
         return out
 
+    def to_dict(self) -> dict:
+        """JSON-ready dict (SI): the equilibrium, signal names, A, B, C, D as nested lists,
+        the eigenvalues (1/s) as ``{"re", "im"}`` pairs and the notes."""
+        return {"equilibrium": self.op.to_dict(),
+                "states": list(self.state_names), "inputs": list(self.input_names),
+                "outputs": list(self.output_names),
+                "A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(),
+                "D": self.D.tolist(),
+                "eigenvalues": [{"re": float(e.real), "im": float(e.imag)}
+                                for e in self.eigenvalues],
+                "notes": list(self.notes)}
+
     def to_control(self, outputs: Sequence[str] | None = None):
         """python-control ``StateSpace`` with signal names (selected outputs)."""
         import control
@@ -154,9 +166,10 @@ class PositionModel:
         w = self.w0
         return control.tf([self.kv], [1.0 / w ** 2, 2.0 * self.zeta / w, 1.0, 0.0])
 
-    def as_dict(self) -> dict:
-        return {"Kv": self.kv, "w0": self.w0, "zeta": self.zeta,
-                "fit_error": self.fit_error, "band_rad_s": list(self.band)}
+    def to_dict(self) -> dict:
+        """JSON-ready dict: Kv (m/(V s)), w0 (rad/s), zeta, fit error, fitted band (rad/s)."""
+        return {"Kv": float(self.kv), "w0": float(self.w0), "zeta": float(self.zeta),
+                "fit_error": float(self.fit_error), "band_rad_s": [float(b) for b in self.band]}
 
 
 def reduced_position_model(lin: TangentModel, output: str = "x") -> PositionModel:

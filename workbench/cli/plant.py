@@ -83,22 +83,13 @@ def _linearize(args: argparse.Namespace) -> int:
     lin = linearize.tangent(plant, op)
     red_err = None
     try:
-        red = linearize.reduced_position_model(lin).as_dict()
+        red = linearize.reduced_position_model(lin).to_dict()
     except WorkbenchError as exc:
         red, red_err = None, str(exc)
     ev = lin.eigenvalues
-    out = {
-        "plant": str(args.plant),
-        "equilibrium": {"x": op.x, "u": op.u, "p_a": op.p_a, "p_b": op.p_b,
-                        "state": {k: float(v) for k, v in zip(op.state_names, op.state)}},
-        "states": list(lin.state_names),
-        "inputs": list(lin.input_names),
-        "outputs": list(lin.output_names),
-        "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist(),
-        "eigenvalues": [{"re": float(e.real), "im": float(e.imag)} for e in ev],
-        "reduced_model": red,
-        "notes": list(lin.notes) + ([red_err] if red_err else []),
-    }
+    tangent = lin.to_dict()
+    notes = tangent.pop("notes") + ([red_err] if red_err else [])
+    out = {"plant": str(args.plant), **tangent, "reduced_model": red, "notes": notes}
     if args.json:
         print(json.dumps(out, indent=2))
         return 0

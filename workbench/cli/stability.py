@@ -105,7 +105,7 @@ def _limits(args: argparse.Namespace) -> int:
     else:
         lim, where, notes = _limits_of_model(args), "model", []
     if args.json:
-        out = lim.as_dict()
+        out = lim.to_dict()
         if args.plant is not None:
             out = {**out, "plant": str(args.plant), "x": args.x, "notes": notes}
         print(json.dumps(json_safe(out), indent=2))

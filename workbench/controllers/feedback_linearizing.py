@@ -209,8 +209,10 @@ class Feasibility:
     def feasible(self) -> bool:
         return not self.reasons
 
-    def as_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of every field (SI; tuples as lists)."""
+        return {k: list(v) if isinstance(v, tuple) else v
+                for k, v in ((k, getattr(self, k)) for k in self.__dataclass_fields__)}
 
 
 def _design_pressures(model: DriveModel, plant, x: float) -> tuple[float, float]:

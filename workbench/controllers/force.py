@@ -359,8 +359,8 @@ class PressurePlan:
         """Largest |command_a - command_b|, V (0 when one 5/3 valve can realise the plan)."""
         return float(np.max(np.abs(self.command_a - self.command_b)))
 
-    def summary(self) -> dict[str, float]:
-        """Key figures (SI) for tables and JSON."""
+    def to_dict(self) -> dict[str, float]:
+        """JSON-ready key figures (SI: Pa, kg/s, kg, V); the time series are left out."""
         return {"p_min": float(min(self.p_a.min(), self.p_b.min())),
                 "p_max": float(max(self.p_a.max(), self.p_b.max())),
                 "level_min": float(self.level.min()), "level_max": float(self.level.max()),
@@ -368,6 +368,16 @@ class PressurePlan:
                 "air_mass": self.air_mass, "command_mismatch": self.command_mismatch,
                 "saturated_fraction": float(np.mean(self.saturated)),
                 "feasible": self.feasible}
+
+    def summary(self) -> str:
+        """One line for people: pressures (bar), peak flow (g/s), air (g), verdict."""
+        d = self.to_dict()
+        verdict = "feasible" if self.feasible else "infeasible: " + "; ".join(self.problems)
+        return (f"pressure plan '{self.rule}': p {d['p_min'] / 1e5:.3g}-{d['p_max'] / 1e5:.3g} bar, "
+                f"level {d['level_min'] / 1e5:.3g}-{d['level_max'] / 1e5:.3g} bar, "
+                f"peak flow {d['q_max'] * 1e3:.3g} g/s, air {d['air_mass'] * 1e3:.3g} g, "
+                f"command mismatch {d['command_mismatch']:.3g} V, "
+                f"saturated {d['saturated_fraction']:.0%}; {verdict}")
 
 
 def _trapz(y, t):

@@ -460,10 +460,11 @@ class GainLimits:
             raise KeyError(f"unknown limit '{name}'; known: {', '.join(self.LIMIT_NAMES)}")
         return None if self.kv is None else getattr(self, name) / self.kv
 
-    def as_dict(self) -> dict:
-        """Plain dict: k0, the four limits (1/s), the margins, then context.
+    def to_dict(self) -> dict:
+        """JSON-ready dict: k0, the four limits (1/s), the margins, then context.
 
-        Infinite margins stay ``inf`` here; the CLI writes them as JSON null.
+        Infinite margins stay ``inf`` here; writers pass the dict through
+        :func:`workbench.params.json_safe`, which makes them JSON null.
         """
         d = {"k0": self.k0, "continuous": self.continuous, "pct": self.pct,
              "sampled": self.sampled, "sampled_delay": self.sampled_delay,
