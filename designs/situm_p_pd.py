@@ -84,7 +84,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
     quick = args.quick
     with rp.step("load plant"):
         plant = Plant.from_toml(PLANT)
-        summ = plant.summary()
+        summ = plant.to_dict()
         prm = plant.params
         done.append(rp.Section("Plant", [
             rp.Paragraph("Rodless cylinder with a 5/3 proportional valve and a 10 ms position "

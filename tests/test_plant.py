@@ -516,8 +516,8 @@ def test_data_file_coefficients_are_reproduced_by_its_command():
 
 def test_summary_reports_the_valve_law():
     aff, iso = _affine_plant(), Plant.from_toml(PLANTS / "rig25_mpye.toml")
-    assert aff.summary()["valve_law"] == "input_affine"
-    assert iso.summary()["valve_law"] == "iso6358"
+    assert aff.to_dict()["valve_law"] == "input_affine"
+    assert iso.to_dict()["valve_law"] == "iso6358"
     # Full-opening flow from the law in use: 45.4 g/s fitted vs 44.4 g/s ISO
     # (the fit's error at p_atm, fully open); within 5 %.
     assert aff.full_opening_flow() == pytest.approx(iso.full_opening_flow(), rel=0.05)
@@ -530,7 +530,7 @@ def test_summary_chamber_volumes_are_the_full_stroke_volumes(tmp_path):
     written out from the file's numbers (bore 25 mm, rod 10 mm, stroke 0.5 m,
     dead 5 cm^3). A handful of roundings in each: 1e-14 relative."""
     plant = Plant.from_toml(write_plant(tmp_path / "p.toml", (), {"cylinder.rod_diameter": 0.01}))
-    s = plant.summary()
+    s = plant.to_dict()
     assert s["volume_a_max_m3"] == pytest.approx(5e-6 + math.pi / 4 * 0.025 ** 2 * 0.5, rel=1e-14)
     assert s["volume_b_max_m3"] == pytest.approx(
         5e-6 + math.pi / 4 * (0.025 ** 2 - 0.01 ** 2) * 0.5, rel=1e-14)

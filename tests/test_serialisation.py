@@ -37,14 +37,6 @@ FORBIDDEN = ("as_dict", "as_json", "to_json")
 ALLOWED = {
     ("workbench.identify.grey_box", "GreyBoxResult", "as_dict"):
         "identify/grey_box.py owned by the integrate/signals helpers during the re-layout",
-    ("workbench.validate", "Specification", "as_dict"):
-        "validate.py owned by the signals helper during the re-layout",
-    ("workbench.validate", "SegmentMetrics", "as_dict"):
-        "validate.py owned by the signals helper during the re-layout",
-    ("workbench.stability.maps", "StabilityMap", "as_dict"):
-        "stability/maps.py owned by the plantmaps helper during the re-layout",
-    ("workbench.plant", "Plant", "summary"):
-        "plant.py owned by the plantmaps helper; summary() returns a dict (to become to_dict)",
 }
 
 

@@ -166,7 +166,7 @@ class SegmentMetrics:
     iae: float = math.nan
     complete: bool = True
 
-    def as_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         s = self.segment
         return {"kind": s.kind, "start": s.start, "end": s.end, "r_start": s.r_start,
                 "r_end": s.r_end, "overshoot": self.overshoot, "overshoot_abs": self.overshoot_abs,

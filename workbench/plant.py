@@ -409,8 +409,8 @@ class Plant:
                                       prm["supply.pressure"], prm["gas.atmospheric_pressure"],
                                       prm["gas.temperature"], prm["gas.temperature"]))
 
-    def summary(self) -> dict[str, Any]:
-        """Facts a rig engineer checks first (SI)."""
+    def to_dict(self) -> dict[str, Any]:
+        """Facts a rig engineer checks first (SI), JSON-ready (``workbench check --json``)."""
         from . import units
         prm = self.params
         p_s, p_atm = prm["supply.pressure"], prm["gas.atmospheric_pressure"]
@@ -437,6 +437,15 @@ class Plant:
             "parameters": len(self.param_names),
             "controller": dict(self.controller_params),
         }
+
+    def summary(self) -> str:
+        """One line for people: name, bore/stroke, supply, valve flow, effects."""
+        d = self.to_dict()
+        return (f"{d['name']}: stroke {d['stroke_m'] * 1e3:.0f} mm, piston area "
+                f"{d['area_a_m2'] * 1e4:.2f} cm^2, supply "
+                f"{self.params['supply.pressure'] / 1e5:.2f} bar abs, valve "
+                f"{d['valve_flow_full_opening_l_min_anr']:.0f} l/min ANR ({d['valve_law']}), "
+                f"effects: {', '.join(d['effects']) or 'none'}")
 
     def __repr__(self) -> str:
         eff = ", ".join(self.effects) or "no effects"

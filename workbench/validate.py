@@ -142,7 +142,7 @@ class Specification:
         """Half-width (m) of the settling band for a step of ``step_size`` m."""
         return max(self.settling_band * abs(step_size), self.band_floor)
 
-    def as_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, float]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
@@ -279,12 +279,12 @@ class Validation:
     def to_dict(self) -> dict[str, Any]:
         """Plain data for JSON (SI)."""
         return {"label": self.label, "passed": self.passed, "error": self.error,
-                "wall_time": self.wall_time, "spec": self.spec.as_dict(),
+                "wall_time": self.wall_time, "spec": self.spec.to_dict(),
                 "checks": [{"name": c.name, "value": c.value, "limit": c.limit, "unit": c.unit,
                             "bound": c.bound, "passed": c.passed, "detail": c.detail}
                            for c in self.checks],
                 "metrics": {f.name: getattr(self.metrics, f.name) for f in fields(self.metrics)},
-                "segments": [s.as_dict() for s in self.segments]}
+                "segments": [s.to_dict() for s in self.segments]}
 
 
 def _worst(items, key: Callable) -> Any:

@@ -43,7 +43,7 @@ def _check(args: argparse.Namespace) -> int:
     from .. import units
     from ..plant import Plant
     plant = Plant.from_toml(args.plant)
-    s = plant.summary()
+    s = plant.to_dict()
     if args.json:
         print(json.dumps(s, indent=2))
         return 0

@@ -213,10 +213,10 @@ def _map(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     smap.to_csv(out / "map.csv")
-    summary = {k: v for k, v in smap.as_dict().items() if k != "rho"}
+    summary = {k: v for k, v in smap.to_dict().items() if k != "rho"}
     summary["files"] = {"csv": str(out / "map.csv"), "json": str(out / "map.json"),
                         "png": str(out / "map.png")}
-    atomic_write_text(out / "map.json", json.dumps(smap.as_dict(), indent=1) + "\n")
+    atomic_write_text(out / "map.json", json.dumps(smap.to_dict(), indent=1) + "\n")
     if not args.no_plot:
         plots.save_figure(plots.stability_map_figure(smap), out / "map.png")
     if args.json:

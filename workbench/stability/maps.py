@@ -96,7 +96,7 @@ class StabilityMap:
     def points_per_s(self) -> float:
         return self.rho.size / self.elapsed_s if self.elapsed_s > 0 else float("inf")
 
-    def as_dict(self) -> dict:
+    def to_dict(self) -> dict:
         def arr(a):
             return [[None if not np.isfinite(v) else float(v) for v in row] for row in a]
         out = {"plant": self.plant_name, "position_m": self.position,
@@ -173,7 +173,7 @@ def stability_map(plant: Plant, x: Axis, y: Axis, *, position: float | None = No
     elapsed = time.perf_counter() - t_start
     return StabilityMap(x=x, y=y, rho=cat["rho"].reshape(ny, nx), kv=cat["kv"].reshape(ny, nx),
                         kp=cat["kp"].reshape(ny, nx), hidden_modes=cat["hidden"].reshape(ny, nx),
-                        plant_name=str(plant.summary().get("name", "")),
+                        plant_name=str(plant.name or ""),
                         position=pos, controller=ctrl, delay_samples=int(delay_samples),
                         boundary=boundary, fallbacks=fallbacks, elapsed_s=elapsed,
                         notes=_notes(plant, cat, fallbacks))
