@@ -94,4 +94,4 @@ from .model import NMPC_STATES, STATE_EFFECTS, horizon_reference, prediction_mod
 from .results import NMPCState, Solution, StepInfo
 
 __all__ = ["NMPC", "NMPCState", "StepInfo", "Solution", "Recorder", "DoMPC", "prediction_model",
-           "horizon_reference"]
+           "horizon_reference", "STATE_EFFECTS", "NMPC_STATES"]
