@@ -287,34 +287,67 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
     Trajectory at ``output_times`` with the command applied and the reference.
     """
     T = float(controller.sample_time)
+    grid = _grid(T, _duration(reference, t_end), output_times)
+    if x0 is None:
+        x0 = float(np.clip(reference(grid.out_t[0]), 0.0, plant.stroke))
+    sim = Simulator(plant, rtol, atol, params)
+    state = _initial(plant, x0)
+    sampler = _Sampler(plant, controller, reference, state, position_resolution,
+                       command_resolution, delay_samples)
+    run = _run_uniform if grid.per else _run_events
+    with _progress(len(grid.events) - 1, "closed loop", progress) as bar:
+        states, u_hist, r_hist = run(grid, sim, sampler, reference, state, bar)
+    states, u_hist, r_hist = states[grid.out_idx], u_hist[grid.out_idx], r_hist[grid.out_idx]
+    outs = sim.outputs(states, u_hist)
+    return Trajectory(time=grid.out_t, states=states, inputs=u_hist.reshape(-1, 1), outputs=outs,
+                      state_names=plant.state_names, output_names=plant.output_names,
+                      reference=r_hist, units=_units(plant),
+                      info={"mode": "closed_loop", "sample_time": T})
+
+
+def _duration(reference, t_end: float | None) -> float:
+    """``t_end``, else the reference's duration (s)."""
     if t_end is None:
         t_end = getattr(reference, "duration", None)
         if t_end is None:
             raise InputError("give t_end for a reference without a duration")
-    prm = plant.params
-    u_min, u_max = prm["valve.command_min"], prm["valve.command_max"]
-    if position_resolution is None:
-        position_resolution = prm.get("controller.position_resolution")
-    if command_resolution is None:
-        command_resolution = prm.get("controller.command_resolution")
-    n_samples = int(np.floor(t_end / T + 1e-9))
-    t_ctrl = T * np.arange(n_samples + 1)
+    return t_end
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """The times of a closed-loop run.
+
+    Attributes
+    ----------
+    events : s, the control samples and the output times merged (closer than 1e-9 s: one).
+    is_ctrl : bool per event, a control sample.
+    ctrl_pos : indices of the control samples in ``events``.
+    out_t : s, the output times. out_idx : index of each output time in ``events``.
+    per : events per control interval when every interval has the same number of
+        equidistant events, from the first event to the last (the fast path: one
+        CVODES call per interval); else 0.
+    """
+
+    events: np.ndarray
+    is_ctrl: np.ndarray
+    ctrl_pos: np.ndarray
+    out_t: np.ndarray
+    out_idx: np.ndarray
+    per: int
+
+
+def _grid(T: float, t_end: float, output_times: Sequence[float] | None) -> _Grid:
+    """Control samples every T from the first output time, merged with the output times
+    (default: the samples 0 .. t_end)."""
     if output_times is None:
-        out_t = t_ctrl.copy()
+        out_t = T * np.arange(int(np.floor(t_end / T + 1e-9)) + 1)
     else:
         out_t = np.asarray(output_times, dtype=float)
         if np.any(np.diff(out_t) <= 0):
             raise InputError("output_times must be strictly increasing")
     t0 = out_t[0]
     t_ctrl = t0 + T * np.arange(int(np.floor((out_t[-1] - t0) / T + 1e-9)) + 1)
-    if x0 is None:
-        x0 = float(np.clip(reference(t0), 0.0, plant.stroke))
-    sim = Simulator(plant, rtol, atol, params)
-    state = _initial(plant, x0)
-    ix = plant.state_index("x")
-    iv = plant.state_index("v")
-    ipa, ipb = plant.state_index("p_a"), plant.state_index("p_b")
-
     events = np.union1d(t_ctrl, out_t)
     # merge events closer than 1e-9 s
     keep = np.concatenate(([True], np.diff(events) > 1e-9))
@@ -322,7 +355,6 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
     is_ctrl = np.zeros(len(events), dtype=bool)
     is_ctrl[np.clip(np.searchsorted(events, t_ctrl - 1e-9), 0, len(events) - 1)] = True
     out_idx = np.clip(np.searchsorted(events, out_t - 1e-9), 0, len(events) - 1)
-
     # fast path: the same number of output points in every control interval
     ctrl_pos = np.flatnonzero(is_ctrl)
     per = np.diff(ctrl_pos)
@@ -331,62 +363,94 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
     if uniform:
         ev_dt = np.diff(events)
         uniform = np.allclose(ev_dt, ev_dt[0], rtol=1e-9, atol=1e-12)
+    return _Grid(events=events, is_ctrl=is_ctrl, ctrl_pos=ctrl_pos, out_t=out_t,
+                 out_idx=out_idx, per=int(per[0]) if uniform else 0)
 
-    cstate = controller.reset()
-    pending = [None] * delay_samples
-    u_now = float(np.clip(state[plant.state_names.index("spool")], u_min, u_max)) \
-        if "spool" in plant.state_names else prm["valve.command_center"]
-    states = np.empty((len(events), len(state)))
-    u_hist = np.empty(len(events))
-    r_hist = np.empty(len(events))
 
-    def control_at(k_ev: int) -> None:
-        nonlocal cstate, u_now
-        y = {"x": _quantise(float(state[ix]), position_resolution), "v": float(state[iv]),
-             "p_a": float(state[ipa]), "p_b": float(state[ipb])}
-        r = float(reference(events[k_ev]))
-        cstate, u_cmd = controller.update(cstate, r, y)
-        u_cmd = _quantise(float(np.clip(u_cmd, u_min, u_max)), command_resolution)
-        u_cmd = float(np.clip(u_cmd, u_min, u_max))
-        if delay_samples:
-            pending.append(u_cmd)
-            u_cmd = pending.pop(0)
+class _Sampler:
+    """The controller as the loop sees it: measure, update, clip, quantise, delay.
+
+    The position is quantised by the ADC step ``position_resolution`` (m), the
+    command clipped to [command_min, command_max], quantised by the DAC step
+    ``command_resolution`` (V) and applied ``delay_samples`` samples later (until
+    then the spool's initial position, or the valve centre, is held). ``u`` is the
+    command applied now, V.
+    """
+
+    def __init__(self, plant: Plant, controller, reference, state: np.ndarray,
+                 position_resolution: float | None, command_resolution: float | None,
+                 delay_samples: int) -> None:
+        prm = plant.params
+        self.controller, self.reference = controller, reference
+        self.u_min, self.u_max = prm["valve.command_min"], prm["valve.command_max"]
+        self.position_resolution = (prm.get("controller.position_resolution")
+                                    if position_resolution is None else position_resolution)
+        self.command_resolution = (prm.get("controller.command_resolution")
+                                   if command_resolution is None else command_resolution)
+        self.ix, self.iv = plant.state_index("x"), plant.state_index("v")
+        self.ipa, self.ipb = plant.state_index("p_a"), plant.state_index("p_b")
+        self.cstate = controller.reset()
+        self.pending = [None] * delay_samples
+        spool = plant.states_of_kind("spool")
+        self.u = float(np.clip(state[spool[0]], self.u_min, self.u_max)) \
+            if spool else prm["valve.command_center"]
+
+    def sample(self, state: np.ndarray, t: float) -> None:
+        """The controller's update at time ``t`` (s) from the plant's ``state``."""
+        y = {"x": _quantise(float(state[self.ix]), self.position_resolution),
+             "v": float(state[self.iv]), "p_a": float(state[self.ipa]),
+             "p_b": float(state[self.ipb])}
+        r = float(self.reference(t))
+        self.cstate, u_cmd = self.controller.update(self.cstate, r, y)
+        u_cmd = _quantise(float(np.clip(u_cmd, self.u_min, self.u_max)), self.command_resolution)
+        u_cmd = float(np.clip(u_cmd, self.u_min, self.u_max))
+        if self.pending:
+            self.pending.append(u_cmd)
+            u_cmd = self.pending.pop(0)
             if u_cmd is None:
-                u_cmd = u_now
-        u_now = u_cmd
+                u_cmd = self.u
+        self.u = u_cmd
 
-    with _progress(len(events) - 1, "closed loop", progress) as bar:
-        if uniform:
-            m = int(per[0])
-            dur = float(events[ctrl_pos[1]] - events[ctrl_pos[0]]) if len(ctrl_pos) > 1 else T
-            states[0] = state
-            for j, k in enumerate(ctrl_pos[:-1]):
-                control_at(k)
-                r_hist[k:k + m] = reference(events[k:k + m])
-                u_hist[k:k + m] = u_now
-                block = sim.step(state, u_now, dur, m)
-                states[k + 1:k + m + 1] = block
-                state = block[-1]
-                if j % 50 == 0:
-                    bar.update(min(50 * m, len(events) - 1 - k))
-            last = len(events) - 1
-            control_at(last)
-            u_hist[last], r_hist[last] = u_now, reference(events[last])
-        else:
-            for k in range(len(events)):
-                if is_ctrl[k]:
-                    control_at(k)
-                states[k] = state
-                u_hist[k] = u_now
-                r_hist[k] = reference(events[k])
-                if k + 1 < len(events):
-                    state = sim.step(state, u_now, events[k + 1] - events[k])[-1]
-                    if k % 200 == 0:
-                        bar.update(min(200, len(events) - 1 - k))
 
-    states, u_hist, r_hist = states[out_idx], u_hist[out_idx], r_hist[out_idx]
-    outs = sim.outputs(states, u_hist)
-    return Trajectory(time=out_t, states=states, inputs=u_hist.reshape(-1, 1), outputs=outs,
-                      state_names=plant.state_names, output_names=plant.output_names,
-                      reference=r_hist, units=_units(plant),
-                      info={"mode": "closed_loop", "sample_time": T})
+def _run_uniform(grid: _Grid, sim: Simulator, sampler: _Sampler, reference,
+                 state: np.ndarray, bar) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The loop when every control interval holds ``grid.per`` equidistant events: one
+    CVODES call per interval. Returns states, commands and references at the events."""
+    events, ctrl_pos, m = grid.events, grid.ctrl_pos, grid.per
+    states = np.empty((len(events), len(state)))
+    u_hist, r_hist = np.empty(len(events)), np.empty(len(events))
+    dur = float(events[ctrl_pos[1]] - events[ctrl_pos[0]])
+    states[0] = state
+    for j, k in enumerate(ctrl_pos[:-1]):
+        sampler.sample(state, events[k])
+        r_hist[k:k + m] = reference(events[k:k + m])
+        u_hist[k:k + m] = sampler.u
+        block = sim.step(state, sampler.u, dur, m)
+        states[k + 1:k + m + 1] = block
+        state = block[-1]
+        if j % 50 == 0:
+            bar.update(min(50 * m, len(events) - 1 - k))
+    last = len(events) - 1
+    sampler.sample(state, events[last])
+    u_hist[last], r_hist[last] = sampler.u, reference(events[last])
+    return states, u_hist, r_hist
+
+
+def _run_events(grid: _Grid, sim: Simulator, sampler: _Sampler, reference,
+                state: np.ndarray, bar) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The loop event by event: a control update at the control samples, one CVODES call
+    to the next event. Returns states, commands and references at the events."""
+    events = grid.events
+    states = np.empty((len(events), len(state)))
+    u_hist, r_hist = np.empty(len(events)), np.empty(len(events))
+    for k in range(len(events)):
+        if grid.is_ctrl[k]:
+            sampler.sample(state, events[k])
+        states[k] = state
+        u_hist[k] = sampler.u
+        r_hist[k] = reference(events[k])
+        if k + 1 < len(events):
+            state = sim.step(state, sampler.u, events[k + 1] - events[k])[-1]
+            if k % 200 == 0:
+                bar.update(min(200, len(events) - 1 - k))
+    return states, u_hist, r_hist

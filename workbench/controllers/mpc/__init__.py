@@ -1,0 +1,97 @@
+"""Nonlinear model predictive position control (NMPC) on the symbolic plant.
+
+:class:`NMPC` predicts with the plant's own CasADi model ``f(x, u, p)`` (states x, v,
+p_a, p_b) by **multiple shooting**: N intervals of one sample time each, the command
+held (ZOH) on every interval, each interval integrated by classical Runge-Kutta (RK4)
+with ``substeps`` fixed steps. In scaled variables it minimises
+
+    1/2 sum_k [ ((x_k - r_k)/x_tol)^2 + ((v_k - r'_k)/v_tol)^2 ]   k = 1..N (node N
+    + 1/2 sum_k ((u_k - u_{k-1})/du_tol)^2                          x terminal_factor)
+    + slack penalties
+
+subject to the command range ``valve.command_min .. command_max`` (hard bounds) and,
+as soft constraints at the shooting nodes, the stroke ``stroke_margin .. L -
+stroke_margin``, the chamber pressures atmosphere .. supply (tightened by
+``pressure_margin``) and the speed ``max_speed``: one slack per kind over the
+horizon with an exact L1 penalty plus a small quadratic term, so a limit gives way
+only where no admissible command can keep it and the problem is always feasible.
+
+Three solution modes share that problem:
+
+``"rti"`` (real-time iteration, the default)
+    One Gauss-Newton SQP step per sample from the previous solution shifted by one
+    sample (warm start). The QP is condensed onto the N command moves (plus the
+    slacks): a dense, strictly convex QP of about 20 variables and 160 rows, solved
+    by DAQP, a dual active-set solver made for embedded MPC. Linearisation and
+    condensing, and the update of the plan from the QP step, are CasADi functions
+    compiled to C through :func:`workbench.integrate.jit.compiled`; with the QP between them
+    they form one CasADi function, so a sample costs one call from Python.
+``"sqp"``
+    The same Gauss-Newton steps repeated until the command step is below
+    ``tolerance`` (at most ``max_iterations``).
+``"ipopt"``
+    The full multiple-shooting NLP solved by IPOPT with exact Hessians (the accurate
+    reference), warm started with the previous primal and dual solution shifted.
+
+Integrator and sensitivities: the chamber modes of the 25 mm rig reach 1e3 1/s at
+mid-stroke and 1e4 .. 2.5e4 1/s within 10 mm of an end (small chamber, pressure
+ratio near 1) and the end stops are a 300 Hz contact. A fixed number of simplified
+Newton iterations of an implicit Runge-Kutta step (Radau IIA) diverged in such
+states; RK4's error stays bounded there (the fast modes exist only near a pressure
+ratio of 1, in the valve law's laminar patch, which limits their growth) and is
+typically 1e-4 mm in position per sample on the trajectories the loop runs. The interval map is therefore RK4 (defects exact); its
+Jacobians are by default the (1, 2) Pade approximant (L-stable, 3rd order) of the
+exponential of the continuous Jacobian at the interval's midpoint, 5x cheaper than
+differentiating the RK4 steps (``sensitivities="exact"``) with the same closed-loop
+tracking. With inexact Jacobians the SQP fixed point satisfies the dynamics exactly
+but is only close to optimal (on the tests, 1e-3 V from IPOPT's commands);
+``"exact"`` converges to the NLP's optimum.
+
+The controller reads the full state (x, v, p_a, p_b) from the measurements the
+simulator passes; its prediction model must therefore be a 4-state plant
+(:meth:`NMPC.for_plant` reduces any plant file to one: lines, spool dynamics, heat
+transfer and supply droop are left to the feedback). A force observer
+(``disturbance_gain``) estimates what the model lacks (dry friction, a load) from
+the velocity it mispredicted, which gives the loop integral action. The reference
+is known only at the current sample (no preview): over the horizon it is
+extrapolated along the current reference rate when that rate is below
+``reference_rate_limit`` (a ramp), else held (a step).
+
+Examples
+--------
+>>> from workbench import Plant, simulate, validate
+>>> from workbench.controllers.mpc import NMPC
+>>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")            # doctest: +SKIP
+>>> nmpc = NMPC.for_plant(plant, horizon=20)                            # doctest: +SKIP
+>>> run = simulate.closed_loop(plant, nmpc, validate.validation_profile(plant))  # doctest: +SKIP
+>>> sol = nmpc.solve({"x": 0.25, "v": 0.0, "p_a": 4.5e5, "p_b": 4.5e5}, r=0.3)  # doctest: +SKIP
+>>> sol.commands[0], sol.states[-1]                # V; x, v, p_a, p_b at the horizon's end
+
+Layout
+------
+:mod:`.model`
+    The prediction model (:func:`prediction_model`), the scaled RK4 interval map and
+    its Jacobians, the reference over the horizon (:func:`horizon_reference`).
+:mod:`.problem`
+    The discretised problem: scaling, limits, weights, the force observer.
+:mod:`.qp`
+    The Gauss-Newton SQP step: condensing, the QP, the plan update (modes rti, sqp).
+:mod:`.nlp`
+    The full NLP for IPOPT (mode ipopt).
+:mod:`.update`
+    One update per sample: the solvers per mode, fallback, the report.
+:mod:`.controller`
+    :class:`NMPC`: settings, their checks, the controller protocol.
+:mod:`.results`
+    :class:`StepInfo`, :class:`NMPCState`, :class:`Solution`.
+:mod:`.baselines`
+    :class:`Recorder` (solve times) and :class:`DoMPC` (the same problem in do-mpc).
+"""
+
+from .baselines import DoMPC, Recorder
+from .controller import NMPC
+from .model import NMPC_STATES, STATE_EFFECTS, horizon_reference, prediction_model
+from .results import NMPCState, Solution, StepInfo
+
+__all__ = ["NMPC", "NMPCState", "StepInfo", "Solution", "Recorder", "DoMPC", "prediction_model",
+           "horizon_reference", "STATE_EFFECTS", "NMPC_STATES"]

@@ -1,0 +1,141 @@
+"""The NMPC's prediction model: the plant reduced to x, v, p_a, p_b, its scaled
+interval map (RK4) with the interval Jacobians, and the reference over the horizon.
+
+Scaled variables: states z = (x / L, v / (1 m/s), p_a / p_supply, p_b / p_supply),
+command w = (u - command_center) / command_span.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from ...errors import InputError
+from ...integrate import RK4, explicit_rk
+
+__all__ = ["STATE_EFFECTS", "NMPC_STATES", "V_SCALE", "prediction_model", "horizon_reference",
+           "interval_maps"]
+
+#: Effects that add states to a plant; :func:`prediction_model` removes them.
+STATE_EFFECTS = ("valve_dynamics", "heat_transfer", "line_dynamics", "supply_droop")
+#: The states the NMPC measures and predicts, in the plant's order.
+NMPC_STATES = ("x", "v", "p_a", "p_b")
+#: m/s: velocity scale of the scaled state (position and pressures scale by stroke
+#: and supply pressure).
+V_SCALE = 1.0
+
+
+def prediction_model(plant, effects: Sequence[str] | None = None):
+    """The plant reduced to the four states x, v, p_a, p_b, for prediction.
+
+    Effects that add states are removed: spool dynamics, heat transfer, supply droop,
+    and the lines, whose volume (pi/4 d^2 L_t each) is added to the dead volume of
+    its chamber (the line's delay and resistance are left to the feedback). Of the
+    other effects only those in ``effects`` are kept (default: all of them, e.g. dry
+    friction, deadband, leakage). Dry friction takes its smooth (differentiable) form.
+
+    Parameters
+    ----------
+    plant : workbench.Plant
+    effects : sequence of str, optional
+        Effects to keep; one that adds states is refused.
+
+    Returns
+    -------
+    workbench.Plant
+    """
+    from ...plant import Plant
+    params = plant.params
+    have = tuple(plant.effects)
+    keep = tuple(e for e in have if e not in STATE_EFFECTS) if effects is None else tuple(effects)
+    bad = [e for e in keep if e in STATE_EFFECTS]
+    if bad:
+        raise InputError(f"the NMPC's prediction model has the states x, v, p_a, p_b only; "
+                         f"effect(s) {', '.join(bad)} add states and cannot be kept")
+    unknown = [e for e in keep if e not in have]
+    if unknown:
+        raise InputError(f"effect(s) {', '.join(unknown)} to keep are not in the plant "
+                         f"(it has: {', '.join(have) or 'none'})")
+    if "line_dynamics" in have:
+        v_line = math.pi / 4.0 * params["lines.diameter"] ** 2 * params["lines.length"]
+        params = params.replace(**{
+            "cylinder.dead_volume_a": params["cylinder.dead_volume_a"] + v_line,
+            "cylinder.dead_volume_b": params["cylinder.dead_volume_b"] + v_line})
+    for e in have:
+        if e not in keep:
+            params = params.without_effect(e)
+    return Plant(params, friction="smooth")
+
+
+def horizon_reference(r: float, r_prev: float | None, sample_time: float, horizon: int,
+                      rate_limit: float) -> tuple[np.ndarray, float]:
+    """Reference over the horizon from its current and previous sample (no preview).
+
+    Parameters
+    ----------
+    r, r_prev : m, reference now and one sample ago (``None``: first sample).
+    sample_time : s. horizon : N. rate_limit : m/s.
+
+    Returns
+    -------
+    (N + 1,) positions, m, at the shooting nodes, and the rate, m/s: r + rate k T
+    if |rate| <= ``rate_limit`` (a ramp), else r held with rate 0 (a step).
+    """
+    rate = 0.0 if r_prev is None else (r - r_prev) / sample_time
+    if not abs(rate) <= rate_limit:
+        rate = 0.0
+    return r + rate * sample_time * np.arange(horizon + 1), rate
+
+
+
+def interval_maps(model, scales: np.ndarray, u_center: float, u_span: float,
+                  sample_time: float, substeps: int,
+                  sensitivities: str) -> tuple[ca.Function, ca.Function]:
+    """One shooting interval of the scaled model, and its Jacobians.
+
+    Parameters
+    ----------
+    model : workbench.Plant
+        The 4-state prediction model.
+    scales : (4,) m, m/s, Pa, Pa: z = state / scales.
+    u_center, u_span : V: w = (u - u_center) / u_span.
+    sample_time : s, the interval's length. substeps : RK4 steps per interval.
+    sensitivities : {"pade", "exact"}
+        Jacobians by the (1, 2) Pade approximant of the exponential of the
+        continuous Jacobian at the interval's midpoint, or by differentiating the
+        RK4 steps.
+
+    Returns
+    -------
+    F : casadi.Function ``wb_nmpc_F(z, w, d) -> z+``, the state one interval on with
+        the command w held and the disturbance force d (N, along -x, added to
+        ``load.external_force``).
+    Fj : casadi.Function ``wb_nmpc_Fj(z, w, d) -> (z+, dz+/dz, dz+/dw)``.
+    """
+    nx = len(scales)
+    z = ca.SX.sym("z", nx)
+    w = ca.SX.sym("w")
+    d = ca.SX.sym("d")                                 # estimated disturbance force, N
+    pvec = ca.DM(model.p0) + d * ca.DM(
+        np.eye(len(model.p0))[:, model.param_index("load.external_force")])
+    fz = model.f(z * ca.DM(scales), u_center + u_span * w, pvec) / ca.DM(scales)
+    fc = ca.Function("wb_nmpc_f", [z, w, d], [fz])
+    h = sample_time / substeps
+    zz = z
+    for _ in range(substeps):
+        zz = explicit_rk(RK4, lambda zi: fc(zi, w, d), zz, h)
+    F = ca.Function("wb_nmpc_F", [z, w, d], [zz])
+    if sensitivities == "exact":
+        jac = [ca.jacobian(zz, z), ca.jacobian(zz, w)]
+    else:
+        zm = (z + zz) / 2
+        ja = ca.substitute(ca.jacobian(fz, ca.vertcat(z, w)), z, zm)
+        xa = sample_time * ca.vertcat(ja, ca.SX.zeros(1, nx + 1))
+        eye = ca.SX.eye(nx + 1)
+        # (1, 2) Pade approximant of expm: L-stable, 3rd order
+        phi = ca.solve(eye - 2.0 / 3.0 * xa + ca.mtimes(xa, xa) / 6.0, eye + xa / 3.0)
+        jac = [phi[:nx, :nx], phi[:nx, nx]]
+    return F, ca.Function("wb_nmpc_Fj", [z, w, d], [zz] + jac)

@@ -1,0 +1,118 @@
+"""The NMPC's optimal control problem, discretised: scaling, limits, weights, the
+interval maps, the force observer, and the solvers built on them.
+
+Built once per :class:`~workbench.controllers.mpc.NMPC` (it is immutable; the
+compiled functions live here). The settings that may change without a rebuild are
+packed into one vector ``P`` (see :meth:`Problem.unpack`), a parameter of every
+compiled function.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .model import V_SCALE, interval_maps
+from .nlp import IpoptSolver
+from .qp import sqp_step
+
+__all__ = ["Problem"]
+
+
+class Problem:
+    """The discretised problem and its compiled functions (built once per NMPC).
+
+    Parameters
+    ----------
+    c : NMPC
+        The controller's settings (checked).
+
+    Attributes
+    ----------
+    N, T, L : horizon, sample time (s), stroke (m).
+    sx : (4,) scales of x, v, p_a, p_b (m, m/s, Pa, Pa); u_c, u_s : command centre
+        and span, V; w_lo, w_hi : scaled command range.
+    lo, hi : scaled limits by state index; soft : (state index, slack index) of each
+        soft limit; ns : number of slacks (stroke, pressure, speed).
+    P : settings vector. F, Fj : interval map and its Jacobians (:mod:`.model`).
+    step : the SQP step function (:func:`.qp.sqp_step`).
+    """
+
+    def __init__(self, c) -> None:
+        self.c = c
+        self.nx = 4
+        self._scaling(c.model)
+        self._limits(c)
+        self.P = self._settings_vector(c)
+        self.F, self.Fj = interval_maps(c.model, self.sx, self.u_c, self.u_s, self.T,
+                                        c.substeps, c.sensitivities)
+        self.mass = float(c.model.params["load.mass"])
+        # N, bound of the force estimate (anti wind-up)
+        self.d_max = 0.5 * (self.p_sup - self.p_atm) * c.model.area_a
+        self.step = sqp_step(self)
+        self._ipopt: IpoptSolver | None = None
+
+    def _scaling(self, m) -> None:
+        """Horizon, sample time and the scales of states and command."""
+        prm = m.params
+        self.N = int(self.c.horizon)
+        self.T = float(self.c.sample_time)
+        self.L = L = float(m.stroke)
+        self.p_sup = p_sup = float(prm["supply.pressure"])
+        self.p_atm = float(prm["gas.atmospheric_pressure"])
+        self.u_c = float(prm["valve.command_center"])
+        self.u_s = float(prm["valve.command_span"])
+        self.w_lo = (float(prm["valve.command_min"]) - self.u_c) / self.u_s
+        self.w_hi = (float(prm["valve.command_max"]) - self.u_c) / self.u_s
+        self.sx = np.array([L, V_SCALE, p_sup, p_sup])
+
+    def _limits(self, c) -> None:
+        """Scaled limits of the constrained states and their slacks."""
+        L, p_sup, p_atm = self.L, self.p_sup, self.p_atm
+        mg = float(c.stroke_margin)
+        pm = float(c.pressure_margin) / p_sup
+        self.lo = {0: mg / L, 2: p_atm / p_sup + pm, 3: p_atm / p_sup + pm}
+        self.hi = {0: (L - mg) / L, 2: 1.0 - pm, 3: 1.0 - pm}
+        # soft constraints: (state index, slack index); slacks: stroke, pressure, speed
+        self.soft = [(0, 0), (2, 1), (3, 1)]
+        if c.max_speed is not None:
+            self.lo[1], self.hi[1] = -c.max_speed / V_SCALE, c.max_speed / V_SCALE
+            self.soft.append((1, 2))
+        self.ns = 1 + max(j for _, j in self.soft)
+
+    def _settings_vector(self, c) -> np.ndarray:
+        """P: weights of the 1/2-sum-of-squares cost in scaled variables, slack weights,
+        limits and the observer gain (the layout :meth:`unpack` reads)."""
+        N, nx = self.N, self.nx
+        wx = (self.L / c.position_tolerance) ** 2
+        wv = (V_SCALE / c.velocity_tolerance) ** 2
+        tf = float(c.terminal_factor)
+        return np.concatenate([
+            [wx] * (N - 1) + [tf * wx], [wv] * (N - 1) + [tf * wv],
+            [(self.u_s / c.command_rate_tolerance) ** 2, *c.slack_weights],
+            [self.lo.get(i, -1e3) for i in range(nx)], [self.hi.get(i, 1e3) for i in range(nx)],
+            [c.disturbance_gain]])
+
+    def unpack(self, P):
+        """(wx (N,), wv (N,), wdu, rho1, rho2, lo (4,), hi (4,)) from the settings vector."""
+        N, nx = self.N, self.nx
+        return (P[:N], P[N:2 * N], P[2 * N], P[2 * N + 1], P[2 * N + 2],
+                P[2 * N + 3:2 * N + 3 + nx], P[2 * N + 3 + nx:2 * N + 3 + 2 * nx])
+
+    def estimate(self, zprev, wprev, dprev, x0, est, gain):
+        """Disturbance force (N) from the velocity the model predicted for this sample.
+
+        d_k = d_{k-1} + gain m (v_pred - v_meas) / T, v_pred from the previous measured
+        state and the command applied since; bounded by +-d_max. ``est`` 0 keeps
+        d_{k-1}. Works on numbers and on CasADi MX alike.
+        """
+        vpred = self.F(zprev, wprev, dprev)[1]
+        d = dprev + est * gain * self.mass * (vpred - x0[1]) * V_SCALE / self.T
+        return ca.fmin(ca.fmax(d, -self.d_max), self.d_max)
+
+    @property
+    def ipopt(self) -> IpoptSolver:
+        """The IPOPT solver of the full NLP, built on first use."""
+        if self._ipopt is None:
+            self._ipopt = IpoptSolver(self)
+        return self._ipopt

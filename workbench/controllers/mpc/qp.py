@@ -1,0 +1,191 @@
+"""The Gauss-Newton SQP step of the NMPC: linearise, condense onto the command moves,
+solve the QP, update the plan, all in one CasADi function.
+
+The multiple-shooting problem linearised at the current plan (X, U) has the
+variables dz_k (state corrections at the N + 1 nodes), dw_k (command moves) and the
+slacks. Eliminating the dz_k by the linearised dynamics dz_{k+1} = A_k dz_k +
+B_k dw_k + c_k (c_k: the shooting defects) leaves a dense, strictly convex QP in
+the N moves and the slacks (*condensing*): H (N + ns)^2, and two rows per soft
+constraint and node. :func:`sqp_step` builds
+
+    prep (C): shift the previous plan, update the force estimate, interval
+              Jacobians, condensed QP data
+    QP:       the conic solver (DAQP by default)
+    post (C): the new plan from the QP step, the first command, the predicted
+              limit violations, a sanity flag
+
+as a single function ``wb_nmpc_step``, so a sample costs one call from Python.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from .model import V_SCALE
+
+__all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver"]
+
+
+def sqp_step(pb) -> ca.Function:
+    """One Gauss-Newton SQP step as a single call: prep (C), QP, post (C).
+
+    Parameters
+    ----------
+    pb : workbench.controllers.mpc.problem.Problem
+        Dimensions, scaling, limits and interval maps; ``pb.c.jit`` compiles prep
+        and post to C (:func:`workbench.integrate.jit.compiled`), ``pb.c.qp_solver``
+        names the conic plugin.
+
+    Returns
+    -------
+    casadi.Function
+        ``wb_nmpc_step(Xp, Up, shift, x0, r, rate, up, zprev, dprev, est, P) -> (X, U,
+        u0, viol, ok, step, d)``: the previous plan (shifted by one sample if
+        ``shift``), the measured state, the reference and its rate, the last command,
+        the measured state and force estimate one sample ago (``est``: 1 to update
+        it), the settings vector; the new plan, its first command, the predicted
+        violations (scaled, per state), success, the largest command step, the force
+        estimate used.
+    """
+    prep, post = prepare(pb), apply_step(pb)
+    if pb.c.jit:
+        from ...integrate.jit import compiled
+        prep, post = compiled(prep), compiled(post)
+    qp = qp_solver(pb.c.qp_solver, pb.N + pb.ns, 2 * pb.N * len(pb.soft))
+    ins = [ca.MX.sym(prep.name_in(i), prep.sparsity_in(i)) for i in range(prep.n_in())]
+    o = prep(*ins)
+    sol = qp(h=o[0], g=o[1], a=o[2], lba=o[3], uba=o[4], lbx=o[5], ubx=o[6])
+    res = post(o[9], o[10], o[7], o[8], sol["x"], ins[-1])
+    return ca.Function("wb_nmpc_step", ins, [*res, o[11]],
+                       ["Xp", "Up", "shift", "x0", "r", "rate", "up", "zprev", "dprev",
+                        "est", "P"],
+                       ["X", "U", "u0", "viol", "ok", "step", "d"])
+
+
+def prepare(pb) -> ca.Function:
+    """(previous plan, shift?, measured state, reference, settings) -> QP data."""
+    N, nx = pb.N, pb.nx
+    Xp = ca.MX.sym("Xp", nx, N + 1)
+    Up = ca.MX.sym("Up", 1, N)
+    shift = ca.MX.sym("shift")
+    x0 = ca.MX.sym("x0", nx)
+    r = ca.MX.sym("r")                                 # reference now, scaled
+    rate = ca.MX.sym("rate")                           # its rate, scaled per s
+    up = ca.MX.sym("up")
+    zprev = ca.MX.sym("zprev", nx)                     # measured state one sample ago
+    dprev = ca.MX.sym("dprev")                         # disturbance estimate then, N
+    est = ca.MX.sym("est")                             # 1: update the estimate
+    P = ca.MX.sym("P", pb.P.size)
+    d = pb.estimate(zprev, up, dprev, x0, est, P[-1])
+    X = ca.if_else(shift, ca.horzcat(Xp[:, 1:], Xp[:, N]), Xp)
+    U = ca.if_else(shift, ca.horzcat(Up[:, 1:], Up[:, N - 1]), Up)
+    kk = ca.DM(np.arange(N + 1)).T
+    R = r + rate * pb.T * kk
+    VR = ca.repmat(rate * pb.L / V_SCALE, 1, N + 1)
+    Xn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
+    out = condense(pb)(A, B, Xn - X[:, 1:], x0 - X[:, 0], X, U, R, VR, up, P)
+    return ca.Function("wb_nmpc_prep", [Xp, Up, shift, x0, r, rate, up, zprev, dprev, est, P],
+                       [*out, X, U, d])
+
+
+def condense(pb) -> ca.Function:
+    """Condensed Gauss-Newton QP from interval sensitivities (SX, scalar code).
+
+    Returns ``wb_nmpc_condense(A, B, c, dz0, X, U, R, VR, up, P) -> (H, g, A, lba, uba,
+    lbx, ubx, h, G)``: the QP in the moves and slacks, and the node corrections at
+    zero moves h (nx, N + 1) with their sensitivity G (nx (N + 1), N) to the moves.
+    """
+    N, nx, ns = pb.N, pb.nx, pb.ns
+    A_ = ca.SX.sym("A", nx, nx * N)
+    B_ = ca.SX.sym("B", nx, N)
+    c = ca.SX.sym("c", nx, N)                          # shooting defects
+    dz0 = ca.SX.sym("dz0", nx)                         # measured - guessed x_0
+    X = ca.SX.sym("X", nx, N + 1)
+    U = ca.SX.sym("U", 1, N)
+    R = ca.SX.sym("R", 1, N + 1)
+    VR = ca.SX.sym("VR", 1, N + 1)
+    up = ca.SX.sym("up")
+    P = ca.SX.sym("P", pb.P.size)
+    wx, wv, wdu, rho1, rho2, lo, hi = pb.unpack(P)
+    # dz_k = h_k + G_k dw, G_k with k non-zero columns
+    hs, Gs = [dz0], [ca.SX(nx, 0)]
+    for k in range(N):
+        A = A_[:, k * nx:(k + 1) * nx]
+        Gs.append(ca.horzcat(ca.mtimes(A, Gs[-1]), B_[:, k]))
+        hs.append(ca.mtimes(A, hs[-1]) + c[:, k])
+    Gf = [ca.horzcat(G, ca.SX(nx, N - G.shape[1])) for G in Gs]
+    Hh = ca.horzcat(*hs)
+    Xp = X + Hh                                        # states at dw = 0
+    S = [ca.vertcat(*[Gf[k][i, :] for k in range(1, N + 1)]) for i in range(nx)]
+    ex = (Xp[0, 1:] - R[0, 1:]).T
+    ev = (Xp[1, 1:] - VR[0, 1:]).T
+    D = np.eye(N) - np.eye(N, k=-1)
+    e0 = np.zeros(N)
+    e0[0] = 1.0
+    Wx = ca.repmat(wx, 1, N)
+    Wv = ca.repmat(wv, 1, N)
+    Hc = (ca.mtimes(S[0].T, S[0] * Wx) + ca.mtimes(S[1].T, S[1] * Wv)
+          + wdu * ca.DM(D.T @ D))
+    gc = (ca.mtimes(S[0].T, wx * ex) + ca.mtimes(S[1].T, wv * ev)
+          + wdu * ca.mtimes(ca.DM(D.T), ca.mtimes(ca.DM(D), U.T) - ca.DM(e0) * up))
+    H = ca.diagcat(Hc, rho2 * ca.SX.eye(ns))
+    g = ca.vertcat(gc, rho1 * ca.SX.ones(ns))
+    one = ca.DM.ones(N, 1)
+    rows, lb, ub = [], [], []
+    for i, j in pb.soft:
+        v = Xp[i, 1:].T
+        e = ca.DM.zeros(N, ns)
+        e[:, j] = 1.0
+        rows += [ca.horzcat(S[i], e), ca.horzcat(S[i], -e)]
+        lb += [lo[i] - v, -ca.inf * one]
+        ub += [ca.inf * one, hi[i] - v]
+    lbx = ca.vertcat(pb.w_lo - U.T, ca.DM.zeros(ns))
+    ubx = ca.vertcat(pb.w_hi - U.T, ca.inf * ca.DM.ones(ns))
+    return ca.Function("wb_nmpc_condense", [A_, B_, c, dz0, X, U, R, VR, up, P],
+                       [ca.densify(H), ca.densify(g), ca.densify(ca.vertcat(*rows)),
+                        ca.vertcat(*lb), ca.vertcat(*ub), lbx, ubx, Hh,
+                        ca.densify(ca.vertcat(*Gf))])
+
+
+def apply_step(pb) -> ca.Function:
+    """Apply the QP step: new plan, first command, predicted violations, sanity."""
+    N, nx, ns = pb.N, pb.nx, pb.ns
+    X = ca.SX.sym("X", nx, N + 1)
+    U = ca.SX.sym("U", 1, N)
+    h = ca.SX.sym("h", nx, N + 1)
+    G = ca.SX.sym("G", nx * (N + 1), N)
+    dw = ca.SX.sym("dw", N + ns)
+    P = ca.SX.sym("P", pb.P.size)
+    _, _, _, _, _, lo, hi = pb.unpack(P)
+    du = dw[:N]
+    Un = U + du.T
+    Xn = X + h + ca.reshape(ca.mtimes(G, du), nx, N + 1)
+    viol = ca.vertcat(*[ca.fmax(0.0, ca.fmax(ca.mmax(lo[i] - Xn[i, 1:]),
+                                               ca.mmax(Xn[i, 1:] - hi[i])))
+                        for i in range(nx)])
+    tot = ca.sum1(dw) + ca.sum1(ca.sum2(Xn))
+    ok = ca.logic_and(tot == tot,                      # no NaN
+                      ca.logic_and(ca.mmax(ca.fabs(ca.vec(Xn))) < 1e2,
+                                   ca.logic_and(ca.mmin(Un) >= pb.w_lo - 1e-6,
+                                                ca.mmax(Un) <= pb.w_hi + 1e-6)))
+    Un = ca.fmin(ca.fmax(Un, pb.w_lo), pb.w_hi)        # the QP's tolerance, not a clip
+    return ca.Function("wb_nmpc_post", [X, U, h, G, dw, P],
+                       [Xn, Un, Un[0], viol, ok, ca.mmax(ca.fabs(du))])
+
+
+def qp_solver(name: str, nz: int, nc: int) -> ca.Function:
+    """The CasADi conic plugin ``name`` for a dense QP of nz variables and nc rows."""
+    hs, As = ca.Sparsity.dense(nz, nz), ca.Sparsity.dense(nc, nz)
+    opts: dict[str, Any] = {"error_on_fail": False}
+    if name == "qpoases":
+        opts.update(printLevel="none", sparse=False)
+    elif name == "osqp":
+        opts.update(warm_start_primal=True,
+                    osqp={"verbose": False, "eps_abs": 1e-8, "eps_rel": 1e-8,
+                          "polish": True, "max_iter": 20000})
+    elif name == "qrqp":
+        opts.update(print_iter=False, print_header=False, print_info=False)
+    return ca.conic("wb_nmpc_qp", name, {"h": hs, "a": As}, opts)

@@ -1,0 +1,171 @@
+"""One NMPC update per sample: measured state and reference -> the new memory.
+
+Per mode (see :mod:`workbench.controllers.mpc`):
+
+``"rti"``, ``"sqp"``
+    Gauss-Newton steps (:func:`.qp.sqp_step`) from the previous plan shifted by one
+    sample: one step (RTI) or until the command step is below ``tolerance``. The
+    first sample, and a sample whose warm start failed, start from rest at the
+    measured state and iterate up to ``max_iterations``.
+``"ipopt"``
+    The full NLP (:class:`.nlp.IpoptSolver`) from the shifted primal and dual
+    solution.
+
+If the solver fails the previous plan is applied, shifted.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ...errors import InputError
+from .model import NMPC_STATES, V_SCALE, horizon_reference
+from .results import NMPCState, Solution, StepInfo
+
+__all__ = ["advance", "solution"]
+
+
+@dataclass(frozen=True)
+class _Sample:
+    """What the solvers need of one sample, scaled.
+
+    z : (4,) measured state. r : reference. rate : its rate, 1/s. u_prev : command
+    applied since the last sample. z_prev : (4,) measured state one sample ago.
+    """
+
+    z: np.ndarray
+    r: float
+    rate: float
+    u_prev: float
+    z_prev: np.ndarray
+
+
+def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
+    """One controller update: the new memory (its U[0] is the command).
+
+    Parameters
+    ----------
+    pb : workbench.controllers.mpc.problem.Problem
+    y : measured x (m), v (m/s), p_a, p_b (Pa).
+    r : m, reference now.
+    state : the memory of the previous sample, None at the first.
+    """
+    t0 = time.perf_counter()
+    c = pb.c
+    try:
+        zm = np.array([y[k] for k in NMPC_STATES], dtype=float) / pb.sx
+    except KeyError as exc:
+        raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
+    _, rate = horizon_reference(r, None if state is None else state.r_prev, pb.T, 1,
+                                c.reference_rate_limit)
+    if state is None:
+        s = _Sample(zm, r / pb.L, rate / pb.L, 0.0, zm)
+        dprev, est = 0.0, 0.0
+    else:
+        s = _Sample(zm, r / pb.L, rate / pb.L, state.u_prev, state.z)
+        dprev, est = state.d, 1.0
+    warm = state is not None and c.warm_start
+    lam = None
+    if c.mode == "ipopt":
+        X, U, it, ok, d, lam = _ipopt_update(pb, s, state, warm, dprev, est)
+        viol, restarted = None, False
+    else:
+        X, U, it, ok, viol, d, restarted = _sqp_update(pb, s, state, warm, dprev, est)
+    if not ok:                                         # keep the previous plan, shifted
+        X, U = _previous_plan(pb, state, zm)
+    w0 = float(U[0])
+    info = _step_info(pb, it, ok, viol, restarted, time.perf_counter() - t0)
+    return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info)
+
+
+def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: float,
+                est: float):
+    """Modes rti and sqp: from the shifted plan, or from rest if that fails.
+
+    Returns (X, U, iterations, success, violations, force estimate, restarted).
+    """
+    c = pb.c
+    ok = False
+    if warm:
+        iters = 1 if c.mode == "rti" else c.max_iterations
+        X, U, it, ok, viol, d = _sqp(pb, state.X, state.U, True, s, dprev, est, iters)
+        dprev, est = d, 0.0
+    restarted = False
+    if not ok:                                         # first sample, or the warm start failed
+        restarted = warm
+        iters = c.max_iterations if (state is None or c.mode != "rti" or restarted) else 1
+        X, U = _cold(pb, s.z)
+        X, U, it, ok, viol, d = _sqp(pb, X, U, False, s, dprev, est, iters)
+    return X, U, it, ok, viol, d, restarted
+
+
+def _sqp(pb, X, U, shift: bool, s: _Sample, dprev: float, est: float, iters: int):
+    """Up to ``iters`` full Gauss-Newton steps; stops at a step below tolerance.
+
+    The force estimate is updated in the first step only (``est``).
+    Returns (X, U, iterations, success, violations, force estimate).
+    """
+    ok, it, viol, d = False, 0, None, dprev
+    sh = 1.0 if shift else 0.0
+    for it in range(1, iters + 1):
+        Xn, Un, _, viol, okk, stp, dd = pb.step(X, U, sh, s.z, s.r, s.rate, s.u_prev, s.z_prev,
+                                                dprev, est, pb.P)
+        ok = bool(okk)
+        if it == 1:
+            d = dprev = float(dd)
+            est = 0.0
+        if not ok:
+            break
+        X, U, sh = Xn, Un, 0.0
+        if float(stp) < pb.c.tolerance:
+            break
+    return X, U, it, ok, viol, d
+
+
+def _ipopt_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: float,
+                  est: float):
+    """Mode ipopt: the force estimate, then the NLP from the shifted or a cold guess.
+
+    Returns (X, U, iterations, success, force estimate, multipliers).
+    """
+    c = pb.c
+    d = float(pb.estimate(s.z_prev, s.u_prev, dprev, s.z, est, c.disturbance_gain))
+    X, U = (state.X, state.U) if warm else _cold(pb, s.z)
+    X, U, it, ok, lam = pb.ipopt(X, U, warm, s.z, s.r, s.rate, s.u_prev, d,
+                                 state.lam if warm else None)
+    return X, U, it, ok, d, lam
+
+
+def _cold(pb, zm: np.ndarray):
+    """A plan at rest at the measured state: every node zm, every command move 0."""
+    return ca.DM(np.tile(zm[:, None], (1, pb.N + 1))), ca.DM.zeros(1, pb.N)
+
+
+def _previous_plan(pb, state: NMPCState | None, zm: np.ndarray):
+    """After a failed solve: the previous plan shifted by one sample (or rest)."""
+    if state is None:
+        return _cold(pb, zm)
+    return (ca.horzcat(state.X[:, 1:], state.X[:, -1]),
+            ca.horzcat(state.U[:, 1:], state.U[:, -1]))
+
+
+def _step_info(pb, it: int, ok: bool, viol, restarted: bool, solve_time: float) -> StepInfo:
+    """The update's report, violations in SI units (none after a failure or IPOPT)."""
+    v = np.zeros(4) if viol is None or not ok else np.asarray(viol).ravel()
+    return StepInfo(iterations=it, success=ok, solve_time=solve_time,
+                    restarted=restarted, slack_stroke=max(v[0], 0.0) * pb.L,
+                    slack_pressure=max(v[2], v[3]) * pb.p_sup,
+                    slack_speed=v[1] * V_SCALE if pb.c.max_speed is not None else 0.0)
+
+
+def solution(pb, state: NMPCState, r: float, r_prev: float | None) -> Solution:
+    """The memory of an update as a Solution in SI units."""
+    R, _ = horizon_reference(r, r_prev, pb.T, pb.N, pb.c.reference_rate_limit)
+    X = np.asarray(state.X)
+    return Solution(time=pb.T * np.arange(pb.N + 1), states=(X * pb.sx[:, None]).T,
+                    commands=pb.u_c + pb.u_s * np.asarray(state.U).ravel(),
+                    reference=R, info=state.info, state=state)
