@@ -13,7 +13,7 @@ __version__ = "0.1.0"
 
 #: Sub-packages imported on first use (they pull in reportlab, dask, matplotlib...).
 _LAZY = ("stability", "validate", "report", "identify", "diagnose", "plots", "recording",
-         "robustness")
+         "robustness", "signals", "references", "replay", "integrate", "metrics")
 
 __all__ = [
     "InputError", "WorkbenchError", "Plant", "PlantParams",

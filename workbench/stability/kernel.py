@@ -24,7 +24,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from .. import _jit
+from ..integrate import jit as _jit
 from ..errors import WorkbenchError
 from ..plant import Plant
 
@@ -100,7 +100,7 @@ class _Sweeper:
     delay_samples : int
         Samples of computation delay.
     compile_c : bool
-        Compile the CasADi functions to C (:mod:`workbench._jit`).
+        Compile the CasADi functions to C (:mod:`workbench.integrate.jit`).
     """
 
     def __init__(self, params_dict: dict, friction: str, position: float, controller: dict,

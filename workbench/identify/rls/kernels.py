@@ -155,7 +155,7 @@ def chunk_function(n: int) -> tuple["casadi.Function", str]:
     if n in _CHUNK_FUNCTIONS:
         return _CHUNK_FUNCTIONS[n]
     import casadi as ca
-    from ... import _jit
+    from ...integrate import jit as _jit
     step = _step_function(n)
     acc = step.mapaccum("acc", _CHUNK, [0], [0])
     x0 = ca.MX.sym("x0", step.size1_in(0))
