@@ -110,6 +110,10 @@ def tank_steps(laws: Mapping[str, Callable], reference: str, volume: float = 1e-
     also get their tangent model (tau, G) from
     :func:`workbench.linearize.tank_tangent`.
 
+    The one-state tank is integrated with scipy's LSODA (rtol 1e-8), not with a
+    stepper of :mod:`workbench.integrate`: the laws compared include the measured
+    table itself (:class:`TableLaw`, interpolated in numpy), which CasADi cannot trace.
+
     Parameters
     ----------
     laws : label -> flow(p, u) in kg/s: CasADi-traceable, or numeric with an attribute
