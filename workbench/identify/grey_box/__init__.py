@@ -80,6 +80,16 @@ trajectory in the fit, or residuals that are strongly correlated and more than t
 times the noise. An open-loop replay that drifts while the model's own trajectory
 follows the data is reported in the message, not counted as a poor fit.
 
+Layout
+------
+One concept per module: :mod:`.result` (:class:`GreyBoxResult`), :mod:`.parameters`
+(names resolved against the plant, bounds, scaling), :mod:`.data` (recordings prepared
+for the fit, noise levels, start values), :mod:`.problem` (the multiple-shooting problem:
+Radau steps from :mod:`workbench.integrate`, sparsity, CasADi callbacks),
+:mod:`.covariance`, :mod:`.verdict`, :mod:`.estimate` (:func:`estimate` in steps) and
+:mod:`.synth` (:func:`synthetic_recording`). The before/after replays are those of
+:mod:`workbench.replay`.
+
 Examples
 --------
 A recording simulated by the workbench with a heavier payload, fitted from the plant

@@ -11,6 +11,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ... import replay
 from ...errors import InputError, WorkbenchError
 from ...plant import Plant
 from ...recording import Recording, load_recording
@@ -147,17 +148,18 @@ def _first_value(t: np.ndarray, y: np.ndarray, n: int = 11) -> float:
 
 
 def _initial_state(plant: Plant, d: _Data) -> np.ndarray:
-    """State at the first sample from the recording: measured states, v from x, the
-    rest from the equilibrium at the first position (or resting values)."""
+    """State at the first sample from the recording (:func:`workbench.replay.initial_state`
+    with the first command): measured states, v from x, the rest from the equilibrium
+    at the first position (or resting values)."""
     names = plant.state_names
-    x_first = float(np.clip(d.rec["x"][0], 0.0, plant.stroke))
-    p_a = float(d.rec["p_a"][0]) if "p_a" in d.rec else None
-    p_b = float(d.rec["p_b"][0]) if "p_b" in d.rec else None
     try:
-        st = plant.initial_state(x_first, p_a=p_a, p_b=p_b, u0=float(d.u[0]))
+        st = replay.initial_state(plant, d.rec, u0=float(d.u[0]))
     except WorkbenchError:
-        st = plant.initial_state(x_first, p_a=p_a if p_a else 3e5, p_b=p_b if p_b else 3e5,
-                                 u0=float(d.u[0]))
+        # no equilibrium there: 3 bar where a pressure is not recorded
+        p_a = float(d.rec["p_a"][0]) if "p_a" in d.rec else None
+        p_b = float(d.rec["p_b"][0]) if "p_b" in d.rec else None
+        st = replay.initial_state(plant, d.rec, u0=float(d.u[0]), p_a=p_a if p_a else 3e5,
+                                  p_b=p_b if p_b else 3e5)
     v = _smooth_derivative(d.t, np.asarray(d.rec["x"], dtype=float))
     st[names.index("v")] = float(v[0]) if "v" not in d.rec else float(d.rec["v"][0])
     if "p_s" in names and "p_s" in d.rec:

@@ -128,7 +128,7 @@ class GreyBoxResult:
             tv = np.asarray(truth, dtype=float)
         return (tv >= self.ci95_[:, 0]) & (tv <= self.ci95_[:, 1])
 
-    def as_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (SI; inf and nan as None)."""
         def num(v):
             v = float(v)
@@ -165,6 +165,10 @@ class GreyBoxResult:
             "poor_fit": bool(self.poor_fit), "message": self.message,
             "method": dict(self.method),
         }
+
+    #: The former name of :meth:`to_dict` (the workbench's one serialisation name),
+    #: kept while callers move.
+    as_dict = to_dict
 
     def table(self) -> str:
         """The estimates as a text table, with fits and the verdict."""
