@@ -1,34 +1,261 @@
-"""Replay a recording on a plant model: what ``workbench simulate`` computes.
+"""Replay a recording on a plant model: the one place that does it.
 
-Closed loop on the recording's reference ``r`` with the plant file's ``[controller]``
-when both exist, else open loop on its command ``u``. The simulation starts from the
-recording's first position (clipped into the stroke) and, when recorded, its first
-chamber pressures; the rest of the initial state is the plant's equilibrium there
-(:meth:`workbench.Plant.initial_state`).
+A replay simulates the plant along a recording, from a state at its first sample, with
+one of a few small immutable strategies passed in (as diffrax passes a solver):
+
+* :class:`ClosedLoop` -- CVODES closed loop on the recording's reference ``r`` (held
+  between samples) with a controller (default: the plant file's ``[controller]``).
+* :class:`OpenLoop` -- CVODES open loop on the recorded command ``u`` (zero-order
+  hold), per sample (:func:`workbench.simulate.open_loop`) or once over each run of
+  equal commands (:meth:`workbench.simulate.Simulator.hold`), optionally re-anchored
+  on given states every so many samples.
+* :class:`Fallback` -- a first strategy, and a second one when the first fails.
+
+Any callable ``strategy(plant, recording, x0, params, progress)`` returning something
+indexed by signal name (a :class:`workbench.simulate.Trajectory`) is a strategy too:
+the diagnosis passes its fixed-step engine re-anchored on the measured state
+(:class:`workbench.diagnose.core.EngineOpenLoop`), which is not CVODES.
+
+:func:`run` replays with a strategy; :func:`initial_state` is the state at the
+recording's first sample; :func:`replay` is what ``workbench simulate`` computes
+(closed loop when the recording has ``r`` and the plant a ``[controller]``, else open
+loop, from :func:`initial_state`). Callers: the CLI (:func:`replay`), the grey-box
+estimator's before/after fits and integration check
+(:mod:`workbench.identify.grey_box`), the diagnosis (:func:`workbench.diagnose.core.replay`).
 
 >>> from workbench import Plant
 >>> from workbench.recording import Recording
->>> from workbench.replay import replay
+>>> from workbench import replay as rp
 >>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")       # doctest: +SKIP
->>> result = replay(plant, Recording.load("run.csv"))              # doctest: +SKIP
->>> result.mode, result.recording["x"][:3]                         # doctest: +SKIP
+>>> rec = Recording.load("run.csv")                                  # doctest: +SKIP
+>>> result = rp.replay(plant, rec)                                   # doctest: +SKIP
+>>> result.mode, result.recording["x"][:3]                           # doctest: +SKIP
+>>> run = rp.run(plant, rec, rp.OpenLoop(steps="run"))               # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Protocol, Sequence
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, WorkbenchError
 
-__all__ = ["Replay", "replay", "SIMULATED_COLUMNS"]
+__all__ = ["Replay", "replay", "run", "initial_state", "is_closed", "ClosedLoop", "OpenLoop",
+           "Fallback", "Strategy", "SIMULATED_COLUMNS"]
 
 #: Columns of a recording that the simulation replaces; the others ("r", unknown
 #: columns) are copied from the recording.
 SIMULATED_COLUMNS = ("u", "x", "p_a", "p_b", "p_s", "v")
 
 _MODES = ("auto", "closed", "open")
+
+
+class Strategy(Protocol):
+    """How a recording is replayed: ``(plant, recording, x0, params, progress) -> run``.
+
+    ``x0`` is the state (SI, plant order) at the first sample, ``params`` the plant's
+    parameter vector (None: ``plant.p0``); the run is indexed by signal name.
+    """
+
+    def __call__(self, plant, recording, x0: np.ndarray, params: Sequence[float] | None,
+                 progress: bool | None) -> Any: ...
+
+
+@dataclass(frozen=True)
+class ClosedLoop:
+    """CVODES closed loop on the recording's ``r`` (m, held between samples).
+
+    Attributes
+    ----------
+    controller : object or None
+        The controller (None: :func:`workbench.controllers.from_plant`).
+
+    The trajectory's time runs from 0 s at the recording's first sample.
+    """
+
+    controller: Any = None
+
+    def __call__(self, plant, recording, x0, params=None, progress=False):
+        from . import controllers, simulate
+        t = np.asarray(recording.t, dtype=float) - float(recording.t[0])
+        ctrl = controllers.from_plant(plant) if self.controller is None else self.controller
+        ref = simulate.Reference(times=t, values=np.asarray(recording["r"], dtype=float),
+                                 hold=True)
+        return simulate.closed_loop(plant, ctrl, ref, x0=x0, output_times=t, params=params,
+                                    progress=progress)
+
+
+@dataclass(frozen=True)
+class OpenLoop:
+    """CVODES open loop on the recorded command ``u`` (V, held between samples).
+
+    Attributes
+    ----------
+    steps : {"sample", "run"}
+        "sample": :func:`workbench.simulate.open_loop` (one CVODES call per sample; the
+        trajectory's time from 0 s). "run": one :meth:`Simulator.hold
+        <workbench.simulate.Simulator.hold>` over each run of equal commands (at most
+        64 samples; the trajectory's time as recorded).
+    anchor_every : int or None
+        With ``steps="run"``: the state is reset to ``x0[j]`` at sample ``j *
+        anchor_every`` (``x0`` then holds one state per anchor), which checks another
+        integration over each interval without the drift of a long replay.
+    """
+
+    steps: str = "sample"
+    anchor_every: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.steps not in ("sample", "run"):
+            raise InputError(f"OpenLoop steps must be 'sample' or 'run', got {self.steps!r}")
+        if self.anchor_every is not None and (self.steps != "run" or self.anchor_every < 1):
+            raise InputError("OpenLoop anchor_every needs steps='run' and a positive number "
+                             f"of samples, got {self.anchor_every!r}")
+
+    def __call__(self, plant, recording, x0, params=None, progress=False):
+        from . import simulate
+        if self.steps == "sample":
+            t = recording.t
+            return simulate.open_loop(plant, t - t[0], recording["u"], x0=x0, params=params,
+                                      progress=progress)
+        return hold_runs(plant, np.asarray(recording.t, dtype=float),
+                         np.asarray(recording["u"], dtype=float), x0, params,
+                         self.anchor_every)
+
+
+@dataclass(frozen=True)
+class Fallback:
+    """``first``; when it fails (:class:`WorkbenchError`), ``then``."""
+
+    first: Strategy
+    then: Strategy
+
+    def __call__(self, plant, recording, x0, params=None, progress=False):
+        try:
+            return self.first(plant, recording, x0, params, progress)
+        except WorkbenchError:
+            return self.then(plant, recording, x0, params, progress)
+
+
+def run(plant, recording, strategy: Strategy, x0: np.ndarray | None = None,
+        params: Sequence[float] | None = None, progress: bool | None = False):
+    """Replay ``recording`` on ``plant`` with ``strategy``.
+
+    Parameters
+    ----------
+    plant : workbench.Plant
+    recording : workbench.recording.Recording
+        Time ``t`` (s), and ``u`` (V) or ``r`` (m) as the strategy needs.
+    strategy : Strategy
+        :class:`ClosedLoop`, :class:`OpenLoop`, :class:`Fallback` or another callable.
+    x0 : array, optional
+        State (SI, plant order) at the first sample; default :func:`initial_state`.
+    params : sequence of float, optional
+        Parameter vector (default ``plant.p0``).
+    progress : bool or None
+        Progress bar (None: when on a terminal).
+
+    Returns
+    -------
+    workbench.simulate.Trajectory (or what the strategy returns)
+    """
+    x0 = initial_state(plant, recording) if x0 is None else np.asarray(x0, dtype=float)
+    return strategy(plant, recording, x0, params, progress)
+
+
+def initial_state(plant, recording, u0: float | None = None, p_a: float | None = None,
+                  p_b: float | None = None, recorded_pressures: bool = True) -> np.ndarray:
+    """State at the recording's first sample, SI.
+
+    Parameters
+    ----------
+    plant : workbench.Plant
+    recording : workbench.recording.Recording
+        Its first position ``x`` (m) is clipped into the stroke.
+    u0 : float, optional
+        Command (V) at the first sample, for the spool state (default: the
+        equilibrium command).
+    p_a, p_b : float, optional
+        Chamber pressures (Pa absolute), e.g. smoothed ones; default the recorded first
+        values when ``recorded_pressures`` and recorded, else the equilibrium.
+    recorded_pressures : bool
+        Take missing ``p_a``, ``p_b`` from the recording.
+
+    Returns
+    -------
+    numpy.ndarray
+        :meth:`workbench.Plant.initial_state` at that position and those pressures.
+    """
+    x_first = float(np.clip(recording["x"][0], 0.0, plant.stroke))
+    if recorded_pressures and p_a is None and "p_a" in recording:
+        p_a = float(recording["p_a"][0])
+    if recorded_pressures and p_b is None and "p_b" in recording:
+        p_b = float(recording["p_b"][0])
+    kw = {} if u0 is None else {"u0": float(u0)}
+    return plant.initial_state(x_first, p_a=p_a, p_b=p_b, **kw)
+
+
+def is_closed(plant, recording, mode: str) -> bool:
+    """Whether a replay in ``mode`` ("auto", "closed", "open") runs in closed loop.
+
+    Raises
+    ------
+    InputError
+        "closed" without an ``r`` column or a ``[controller]``; an unknown mode.
+    """
+    if mode not in _MODES:
+        raise InputError(f"replay mode must be one of {', '.join(_MODES)}, got {mode!r}")
+    if mode == "closed":
+        if "r" not in recording:
+            raise InputError("closed-loop replay needs an 'r' column", source=recording.source)
+        if not plant.params.has_controller:
+            raise InputError("closed-loop replay needs a [controller] section",
+                             source=plant.params.source)
+        return True
+    if mode == "open":
+        return False
+    return "r" in recording and plant.params.has_controller
+
+
+def hold_runs(plant, t: np.ndarray, u: np.ndarray, x0: np.ndarray,
+              params: Sequence[float] | None = None, anchor_every: int | None = None):
+    """Open-loop CVODES, u held on [t_k, t_k+1), one :meth:`Simulator.hold
+    <workbench.simulate.Simulator.hold>` per run of equal commands (at most 64 samples).
+
+    ``t`` (s), ``u`` (V) per sample; ``x0`` the first state, or with ``anchor_every``
+    one state per anchor (reset at sample ``j * anchor_every``). The trajectory's time
+    is ``t``.
+    """
+    from . import simulate
+    anchors = None
+    if anchor_every is not None:
+        anchors, every = np.asarray(x0, dtype=float), int(anchor_every)
+        x0 = anchors[0]
+    sim = simulate.Simulator(plant, params=params)
+    n = len(t)
+    states = np.empty((n, len(x0)))
+    states[0] = x0
+    state = np.asarray(x0, dtype=float)
+    dt = np.diff(t)
+    k = 0
+    while k < n - 1:
+        if anchors is not None and k % every == 0:
+            state = np.asarray(anchors[k // every], dtype=float)
+            states[k] = state
+        j = k + 1
+        while (j < n - 1 and u[j] == u[k] and abs(dt[j] - dt[k]) <= 1e-9 * dt[k]
+               and j - k < 64 and (anchors is None or j % every)):
+            j += 1
+        states[k + 1:j + 1] = sim.hold(state, float(u[k]), dt[k:j])
+        state = states[j]
+        k = j
+    outs = sim.outputs(states, u)
+    return simulate.Trajectory(time=np.asarray(t, dtype=float), states=states,
+                               inputs=np.asarray(u, dtype=float).reshape(-1, 1), outputs=outs,
+                               state_names=plant.state_names, output_names=plant.output_names,
+                               info={"mode": "open_loop"})
 
 
 @dataclass(frozen=True)
@@ -53,7 +280,7 @@ class Replay:
 
 
 def replay(plant, recording, mode: str = "auto", progress: bool | None = None) -> Replay:
-    """Simulate ``recording`` on ``plant``.
+    """Simulate ``recording`` on ``plant``: what ``workbench simulate`` computes.
 
     Parameters
     ----------
@@ -71,7 +298,9 @@ def replay(plant, recording, mode: str = "auto", progress: bool | None = None) -
     Returns
     -------
     Replay
-        The trajectory, the simulated recording and the mode that ran.
+        The trajectory, the simulated recording and the mode that ran: closed loop
+        with the plant's controller (:class:`ClosedLoop`) or open loop per sample
+        (:class:`OpenLoop`), from :func:`initial_state`.
 
     Raises
     ------
@@ -79,41 +308,10 @@ def replay(plant, recording, mode: str = "auto", progress: bool | None = None) -
         A closed-loop replay asked for without an ``r`` column or a ``[controller]``,
         or an unknown ``mode``.
     """
-    if mode not in _MODES:
-        raise InputError(f"replay mode must be one of {', '.join(_MODES)}, got {mode!r}")
-    run = _simulate(plant, recording, _is_closed(plant, recording, mode), progress)
-    return Replay(trajectory=run, recording=_as_recording(run, recording),
-                  mode=str(run.info["mode"]))
-
-
-def _is_closed(plant, rec, mode: str) -> bool:
-    """Whether the replay runs in closed loop (see :func:`replay`'s ``mode``)."""
-    if mode == "closed":
-        if "r" not in rec:
-            raise InputError("closed-loop replay needs an 'r' column", source=rec.source)
-        if not plant.params.has_controller:
-            raise InputError("closed-loop replay needs a [controller] section",
-                             source=plant.params.source)
-        return True
-    if mode == "open":
-        return False
-    return "r" in rec and plant.params.has_controller
-
-
-def _simulate(plant, rec, closed: bool, progress: bool | None):
-    """The trajectory at the recording's sample times, from its first measured state."""
-    from . import controllers, simulate
-    t = rec.t
-    x_first = float(np.clip(rec["x"][0], 0.0, plant.stroke))
-    pa = float(rec["p_a"][0]) if "p_a" in rec else None
-    pb = float(rec["p_b"][0]) if "p_b" in rec else None
-    x0 = plant.initial_state(x_first, p_a=pa, p_b=pb)
-    if closed:
-        ctrl = controllers.from_plant(plant)
-        ref = simulate.Reference(times=t - t[0], values=np.asarray(rec["r"]), hold=True)
-        return simulate.closed_loop(plant, ctrl, ref, x0=x0, output_times=t - t[0],
-                                    progress=progress)
-    return simulate.open_loop(plant, t - t[0], rec["u"], x0=x0, progress=progress)
+    strategy = ClosedLoop() if is_closed(plant, recording, mode) else OpenLoop()
+    traj = run(plant, recording, strategy, progress=progress)
+    return Replay(trajectory=traj, recording=_as_recording(traj, recording),
+                  mode=str(traj.info["mode"]))
 
 
 def _as_recording(run, rec):

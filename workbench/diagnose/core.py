@@ -50,7 +50,6 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import WorkbenchError
 from ..params import PlantParams, atomic_write_text
 from ..plant import Plant
 from ..recording import Recording, fit
@@ -63,7 +62,7 @@ from .predict import Predictor, horizons, segments
 from .refit import CandidateModel
 from .witness import Witness, observer_inputs
 
-__all__ = ["Finding", "Diagnosis", "diagnose", "replay"]
+__all__ = ["Finding", "Diagnosis", "diagnose", "replay", "EngineOpenLoop"]
 
 #: s: anchor spacing of the open-loop replay reported when there is no closed loop.
 OPEN_ANCHOR = 0.5
@@ -216,30 +215,45 @@ def _jsonable(v):
 
 
 # ---------------------------------------------------------------------- replay
+@dataclass(frozen=True, eq=False)
+class EngineOpenLoop:
+    """Replay strategy (:class:`workbench.replay.Strategy`) that the diagnosis provides:
+    open loop on u on its fixed-step engine (:mod:`.engine`, ROS2 with stick-slip),
+    re-anchored on the measured (smoothed) state every ``anchor_every`` s.
+
+    It stays here because its numbers are those of the engine, not of CVODES; ``x0``
+    and ``params`` are not used (the anchors come from ``prep``, the parameters from
+    the plant). Returns x, p_a, p_b, u on the recording's samples.
+    """
+
+    prep: Prepared
+    anchor_every: float = OPEN_ANCHOR
+
+    def __call__(self, plant: Plant, recording: Recording, x0=None, params=None,
+                 progress=False) -> dict[str, np.ndarray]:
+        model = CandidateModel(self.prep, plant.params, None)
+        pred = segments(self.prep, self.anchor_every)
+        Y = model.run(pred, {})
+        return {k: pred.full(Y, i) for i, k in enumerate(("x", "p_a", "p_b", "u"))}
+
+
 def replay(plant: Plant, prep: Prepared) -> dict[str, np.ndarray]:
-    """The recording replayed on ``plant``: closed loop on r (CVODES, as ``workbench
-    simulate``) when the diagnosis runs closed loop, else open loop on u re-anchored every
-    :data:`OPEN_ANCHOR` s. Returns x, p_a, p_b, u on the recording's samples."""
-    from .. import simulate
-    rec = prep.rec
-    t = prep.t
-    if prep.closed:
-        x0 = float(np.clip(rec["x"][0], 0.0, plant.stroke))
-        kw = {}
-        if prep.has_pressures:
-            kw = {"p_a": float(prep.pas[0]), "p_b": float(prep.pbs[0])}
-        z0 = plant.initial_state(x0, u0=float(rec["u"][0]), **kw)
-        ref = simulate.Reference(times=t, values=np.asarray(rec["r"], dtype=float), hold=True)
-        try:
-            run = simulate.closed_loop(plant, prep.controller, ref, x0=z0, output_times=t,
-                                       progress=False)
-            return {k: np.asarray(run[k], dtype=float) for k in ("x", "p_a", "p_b", "u")}
-        except WorkbenchError:
-            pass                 # fall back on the engine (re-anchored) below
-    model = CandidateModel(prep, plant.params, None)
-    pred = segments(prep, OPEN_ANCHOR if not prep.closed else 2.0)
-    Y = model.run(pred, {})
-    return {k: pred.full(Y, i) for i, k in enumerate(("x", "p_a", "p_b", "u"))}
+    """The recording replayed on ``plant`` (:mod:`workbench.replay`): closed loop on r
+    (CVODES, :class:`~workbench.replay.ClosedLoop` with the diagnosis' controller, from
+    the first position, smoothed pressures and recorded u) when the diagnosis runs closed
+    loop, falling back on the engine re-anchored every 2 s when CVODES fails; else
+    open loop on u on the engine re-anchored every :data:`OPEN_ANCHOR` s
+    (:class:`EngineOpenLoop`). Returns x, p_a, p_b, u on the recording's samples."""
+    from .. import replay as rp
+    if not prep.closed:
+        return EngineOpenLoop(prep, OPEN_ANCHOR)(plant, prep.rec)
+    pressures = ({"p_a": float(prep.pas[0]), "p_b": float(prep.pbs[0])}
+                 if prep.has_pressures else {})
+    x0 = rp.initial_state(plant, prep.rec, u0=float(prep.rec["u"][0]),
+                          recorded_pressures=False, **pressures)
+    strategy = rp.Fallback(rp.ClosedLoop(prep.controller), EngineOpenLoop(prep, 2.0))
+    run = rp.run(plant, prep.rec, strategy, x0=x0)
+    return {k: np.asarray(run[k], dtype=float) for k in ("x", "p_a", "p_b", "u")}
 
 
 def _observer_rates(prep: Prepared, params: PlantParams, jit: bool) -> np.ndarray:
