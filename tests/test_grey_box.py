@@ -104,7 +104,7 @@ def test_noisy_result_plant_and_report(noisy_result):
     res = noisy_result
     for n in res.names:
         assert res.plant_.params[n] == pytest.approx(res.value(n), rel=1e-12)
-    d = json.loads(json.dumps(res.as_dict()))
+    d = json.loads(json.dumps(res.to_dict()))
     assert set(d["parameters"]) == set(NAMES)
     assert d["parameters"]["load.mass"]["unit"] == "kg"
     assert d["poor_fit"] is False and d["success"] is True

@@ -31,13 +31,9 @@ PLANTS = Path(__file__).resolve().parents[1] / "designs" / "plants"
 
 FORBIDDEN = ("as_dict", "as_json", "to_json")
 
-# Classes in files owned by helpers still running when the rename was made: their
-# methods keep the old name until those files are merged, then the coordinator renames
-# them (and their callers) and deletes the entry. Keyed (module, class, method).
-ALLOWED = {
-    ("workbench.identify.grey_box", "GreyBoxResult", "as_dict"):
-        "identify/grey_box.py owned by the integrate/signals helpers during the re-layout",
-}
+# Exceptions to the naming rule, keyed (module, class, method), each with its reason.
+# Empty: every class follows it. (The re-layout used this list while files moved.)
+ALLOWED: dict[tuple[str, str, str], str] = {}
 
 
 def _modules():

@@ -678,7 +678,7 @@ def _cmd_greybox(args) -> int:
                    x0=args.x0, replay=args.replay, substeps=args.substeps,
                    max_iter=args.max_iter,
                    verbose=args.verbose, progress=False if args.quiet or args.json else None)
-    out = res.as_dict()
+    out = res.to_dict()
     out["plant"] = str(args.plant)
     if args.out:
         d = Path(args.out)

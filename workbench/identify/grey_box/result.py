@@ -166,10 +166,6 @@ class GreyBoxResult:
             "method": dict(self.method),
         }
 
-    #: The former name of :meth:`to_dict` (the workbench's one serialisation name),
-    #: kept while callers move.
-    as_dict = to_dict
-
     def table(self) -> str:
         """The estimates as a text table, with fits and the verdict."""
         rows = [("parameter", "nominal", "estimate", "std", "95 % interval", "unit", "")]
