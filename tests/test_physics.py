@@ -559,7 +559,7 @@ def test_unknown_underlap_law_is_refused():
 
 
 def test_valve_table_generator_uses_the_rounded_law():
-    from workbench.identify.valve_fit import valve_flow_law
+    from workbench.identify.valve import valve_flow_law
     prm = Plant.from_toml(ROOT_PLANTS / "rig25_mpye.toml").params
     d, p, u = 0.05, 3.2e5, prm["valve.command_center"] + 0.1 * prm["valve.command_span"]
     flow = valve_flow_law(prm, leakage=d)

@@ -416,12 +416,3 @@ def test_tank_figure_has_units_on_every_axis(table, fit1):
 def test_cli_valve_errors(argv, message, capsys):
     assert main(["identify", "valve", str(TABLE), "--no-tank"] + argv) == 2
     assert message in capsys.readouterr().err
-
-
-def test_old_module_name_reexports_the_package():
-    """``workbench.identify.valve_fit`` (the old single module) still gives every public name."""
-    from workbench.identify import valve_fit
-
-    assert set(valve_fit.__all__) == set(vf.__all__)
-    for name in vf.__all__:
-        assert getattr(valve_fit, name) is getattr(vf, name), name

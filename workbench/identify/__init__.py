@@ -3,8 +3,7 @@
 Modules: :mod:`.arx` (least squares ARX, order selection, validation),
 :mod:`.residuals` (whiteness and input-independence tests of residuals),
 :mod:`.excitation` (PRBS / APRBS), :mod:`.rls` (recursive least squares with
-forgetting), :mod:`.valve` (paper 003's valve characteristic approximations; the old
-name :mod:`.valve_fit` re-exports it), :mod:`.grey_box` (physical parameters of the
+forgetting), :mod:`.valve` (paper 003's valve characteristic approximations), :mod:`.grey_box` (physical parameters of the
 CasADi plant from recordings).
 
 The ``workbench identify`` command line is :mod:`workbench.cli.identify`.

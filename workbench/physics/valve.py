@@ -97,7 +97,7 @@ def edge_openings(opening, underlap=0.0):
 def rounded_edge_openings(opening, underlap=0.0):
     """Rounded underlap law: (o_plus, o_minus) = ((r + o)/2, (r - o)/2), r = sqrt(o^2 + d^2).
 
-    The law of the valve-table generator (:mod:`workbench.identify.valve_fit`): at the
+    The law of the valve-table generator (:mod:`workbench.identify.valve`): at the
     centre both edges are open d/2, an overlapped edge still passes d^2/(4 |o|) (the
     clearance leakage that falls with the overlap length) and an open edge tends to
     o; o_plus - o_minus = o exactly, and the openings are smooth in o. It differs

@@ -146,7 +146,7 @@ def generate_valve_table(plant_or_params, u_values: Sequence[float] | None = Non
         meta["made_with"] = made_with
     meta.update({
         "plant": f"{prm.name} ({prm.source})",
-        "generator": "workbench.identify.valve_fit.generate_valve_table: port A flow of the "
+        "generator": "workbench.identify.valve.generate_valve_table: port A flow of the "
                      "four-edge valve, every edge with a rounded underlap 'leakage'",
         "supply_pressure": float(p_s), "atmospheric_pressure": float(p_atm),
         "temperature": float(prm["gas.temperature"]),
