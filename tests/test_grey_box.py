@@ -231,7 +231,7 @@ def test_cli_writes_estimates_plant_and_figure(tmp_path, start_plant, noisy, cap
 
 
 def test_bounds_parser():
-    from workbench.cli.identify import _parse_bounds
+    from workbench.cli.identify.greybox import _parse_bounds
     assert _parse_bounds(["load.mass=0.5:5", "valve.null_offset=-0.2:0.2"]) == {
         "load.mass": (0.5, 5.0), "valve.null_offset": (-0.2, 0.2)}
     with pytest.raises(InputError, match="NAME=LOW:HIGH"):

@@ -1,0 +1,225 @@
+"""``workbench identify valve`` and ``valve-table``: paper 003's valve characteristic."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shlex
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import InputError
+from ...identify.valve import (ValveFitReport, analyse, centre_dense_commands,
+                               compare_pressure_gain, generate_valve_table, load_valve_table,
+                               valve_flow_law, write_figures)
+from ...params import PlantParams, atomic_write_text
+
+__all__ = ["add_valve"]
+
+
+def add_valve(subparsers) -> None:
+    """Add ``workbench identify valve`` and ``workbench identify valve-table``."""
+    v = subparsers.add_parser(
+        "valve", help="fit paper 003's valve characteristic approximations I and II",
+        description="Fit a measured valve table (CSV: u [V], p [Pa abs], q_m [kg/s into the "
+                    "port]) with approximation I (full polynomial, degrees n in p, m in u) "
+                    "and/or II (input-affine q = phi(p) + psi(p, sgn Gamma) Gamma(u), Gamma odd, "
+                    "fitted by IPOPT with Gamma(1) = 1 and Gamma monotone). Reports R "
+                    "(multiple correlation coefficient) and errors in g/s, the pressure gain "
+                    "characteristic (q_m = 0 curve) with Cp, Gu against the data, and tank "
+                    "step tests (+-1 V and +-0.1 V at the command centre) against the table "
+                    "(or against --reference-plant's valve when the table was generated).",
+        epilog="Example: workbench identify valve tests/data/valve/rig25_table.csv --approx both "
+               "--out fit/ --plant-toml fitted.toml --base designs/plants/rig25_mpye.toml")
+    v.add_argument("table", metavar="TABLE.csv", help="valve table")
+    v.add_argument("--approx", choices=("I", "II", "both"), default="both",
+                   help="which approximation (default both)")
+    v.add_argument("--degrees", nargs=2, type=int, metavar=("N", "M"),
+                   help="approximation I degrees in p and u (default 5 10, paper 003)")
+    v.add_argument("--select", action="store_true",
+                   help="choose approximation I degrees by 5-fold cross validation "
+                        "(n 1..7, m 1..12)")
+    v.add_argument("--affine-degrees", nargs=3, type=int, default=[5, 5, 2],
+                   metavar=("PHI", "PSI", "GAMMA"),
+                   help="approximation II: degree of phi (-1: phi = 0), of psi_in/psi_out, "
+                        "and number of odd Gamma terms (default 5 5 2, paper 003)")
+    v.add_argument("--pin-ends", action="store_true",
+                   help="approximation II: impose q(p_supply, full inlet) = 0 and "
+                        "q(p_atm, full exhaust) = 0")
+    v.add_argument("--tank-volume", type=float, default=1e-3, metavar="V",
+                   help="tank volume of the step tests, m^3 (default 1e-3)")
+    v.add_argument("--no-tank", action="store_true", help="skip the tank step tests")
+    v.add_argument("--reference-plant", metavar="PLANT.toml",
+                   help="the plant whose valve made the table (see valve-table): its true law "
+                        "is the reference of the tank steps and adds its pressure gain curve")
+    v.add_argument("--leakage", type=float, metavar="D",
+                   help="underlap leakage of --reference-plant's valve (default: the table's "
+                        "'leakage' metadata, else 0)")
+    v.add_argument("--out", metavar="DIR", help="write DIR/valve_fit.json and figures")
+    v.add_argument("--no-plot", action="store_true", help="no figures in DIR")
+    v.add_argument("--json", action="store_true", help="print the results as JSON (SI; errors g/s)")
+    v.add_argument("--plant-toml", metavar="OUT.toml",
+                   help="write a copy of --base with its valve replaced by the fitted "
+                        "approximation II")
+    v.add_argument("--base", metavar="PLANT.toml", help="plant file for --plant-toml")
+    v.set_defaults(func=_cmd_valve)
+
+    g = subparsers.add_parser(
+        "valve-table", help="generate a valve table from a plant's four-edge valve",
+        description="Write a valve table CSV (u, p, q_m) from the plant file's valve (four "
+                    "ISO 6358 edges, its centre, span, offset, deadband) with a symmetric "
+                    "geometric underlap --leakage (fraction of the span) and Gaussian noise "
+                    "(kg/s). The header records the command and the settings.")
+    g.add_argument("plant", metavar="PLANT.toml", help="plant file")
+    g.add_argument("--out", required=True, metavar="TABLE.csv", help="output CSV")
+    g.add_argument("--leakage", type=float, default=0.0, help="underlap, fraction of the span")
+    g.add_argument("--noise", type=float, default=0.0, help="noise standard deviation, kg/s")
+    g.add_argument("--seed", type=int, default=0, help="noise seed")
+    g.add_argument("--u", metavar="LIST",
+                   help="commands, V: a,b,c or START:STOP:NUM (default: 21, denser at the centre)")
+    g.add_argument("--p", metavar="LIST",
+                   help="pressures, Pa abs: a,b,c or START:STOP:NUM (default: 15 from "
+                        "atmosphere to supply)")
+    g.add_argument("--n-u", type=int, default=21, help="number of default commands")
+    g.add_argument("--n-p", type=int, default=15, help="number of default pressures")
+    g.set_defaults(func=_cmd_valve_table)
+
+
+def _cmd_valve(args: argparse.Namespace) -> int:
+    table = load_valve_table(args.table)
+    if args.plant_toml and not args.base:
+        raise InputError("--plant-toml needs --base PLANT.toml (the plant whose valve is "
+                         "replaced by the fitted law)", location="--plant-toml")
+    if args.plant_toml and args.approx == "I":
+        raise InputError("--plant-toml writes the input-affine law: use --approx II or both",
+                         location="--plant-toml")
+    base = PlantParams.from_toml(args.base) if args.base else None
+    phi_deg = None if args.affine_degrees[0] < 0 else args.affine_degrees[0]
+    report = analyse(table, approx=args.approx,
+                     degrees=tuple(args.degrees) if args.degrees else None, select=args.select,
+                     affine_degrees=(phi_deg, args.affine_degrees[1], args.affine_degrees[2]),
+                     pin_ends=args.pin_ends, tank_volume=args.tank_volume, tank=not args.no_tank,
+                     reference=_valve_reference(args, table))
+    result = report.to_dict()
+    if args.plant_toml:
+        report = _write_plant_toml(args, base, table, report, result)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / "valve_fit.json", json.dumps(result, indent=2) + "\n")
+        result["files"] = ["valve_fit.json"] + ([] if args.no_plot else write_figures(report, out))
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    _print_valve(report, table)
+    if args.plant_toml:
+        print(f"  wrote {args.plant_toml}")
+    if args.out:
+        print(f"  wrote {', '.join(result['files'])} in {args.out}")
+    return 0
+
+
+def _valve_reference(args: argparse.Namespace, table):
+    """The true law of --reference-plant (leakage from --leakage or the table), or None."""
+    if not args.reference_plant:
+        return None
+    leak = args.leakage
+    if leak is None:
+        leak = float(table.metadata.get("leakage", 0.0)) if _is_number(
+            table.metadata.get("leakage", "0")) else 0.0
+    return valve_flow_law(args.reference_plant, leak)
+
+
+def _write_plant_toml(args: argparse.Namespace, base: PlantParams, table,
+                      report: ValveFitReport, result: dict[str, Any]) -> ValveFitReport:
+    """--plant-toml: --base with approximation II; a supply mismatch becomes a note."""
+    new = base.replace(**report.approx_2.plant_values())
+    new.to_toml(args.plant_toml)
+    result["plant_toml"] = str(args.plant_toml)
+    p_base, p_tab = base["supply.pressure"], table.supply_pressure
+    if abs(p_base - p_tab) > 0.01 * p_tab:
+        note = (f"the base plant's supply pressure ({p_base:g} Pa) differs from the "
+                f"table's ({p_tab:g} Pa): the input-affine law does not see the supply "
+                "pressure, it holds only at the table's")
+        result["notes"].append(note)
+        report = ValveFitReport(**{**report.__dict__, "notes": report.notes + (note,)})
+    return report
+
+
+def _print_valve(report: ValveFitReport, table) -> None:
+    """The text summary: fits, pressure gain comparisons, tank steps, notes."""
+    print(f"valve table {table.source}: {len(table)} points, u {table.command_range[0]:g}.."
+          f"{table.command_range[1]:g} V, p {table.pressure_range[0] / 1e5:.3f}.."
+          f"{table.pressure_range[1] / 1e5:.3f} bar")
+    for lab, fit in (("approximation I", report.approx_1), ("approximation II", report.approx_2)):
+        if fit is None:
+            continue
+        qd = fit.quality
+        what = (f"n = {fit.degrees[0]}, m = {fit.degrees[1]}" if lab.endswith(" I")
+                else f"phi {len(fit.phi) - 1 if any(fit.phi) else '-'}, psi {len(fit.psi_in) - 1}, "
+                     f"Gamma {len(fit.gamma)} odd terms")
+        print(f"  {lab:<17} {what}: {qd.coefficients} coefficients ({qd.free} free), "
+              f"R = {qd.r:.5f}, errors max {qd.max_error_g_s:.3f} g/s, RMS {qd.rms_g_s:.3f} g/s")
+    refs = [r for r in ("data", report.reference) if r in report.gains]
+    for lab, g in report.gains.items():
+        for r in refs:
+            if lab in refs[:refs.index(r) + 1]:
+                continue
+            cmp_ = compare_pressure_gain(report.gains[r], g, table.pressure_range)
+            if cmp_["commands"]:
+                gu = cmp_["median_rel_gu"]
+                print(f"  pressure gain {lab} vs {r}: max |dp_e| "
+                      f"{cmp_['max_abs_dp_e_Pa'] / 1e5:.4f} bar over {cmp_['commands']} "
+                      f"commands; median relative difference Cp {100 * cmp_['median_rel_cp']:.1f} %"
+                      f", Gu " + (f"{100 * gu:.1f} %" if gu is not None else "n/a"))
+    if report.tank is not None:
+        tk = report.tank
+        for lab in tk.labels():
+            if lab == tk.reference:
+                continue
+            errs = ", ".join(f"{du:+g} V: {100 * tk.max_error(lab, du):.2f} %"
+                             for du in tk.step_sizes())
+            print(f"  tank steps {lab} vs {tk.reference} (max pressure error): {errs}")
+    for n_ in report.notes:
+        print(f"  note: {n_}")
+
+
+def _is_number(text: str) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except (TypeError, ValueError):
+        return False
+
+
+def _float_list(text: str, option: str) -> np.ndarray:
+    """``a,b,c`` or ``START:STOP:NUM`` -> array."""
+    try:
+        if ":" in text:
+            a, b, n = text.split(":")
+            return np.linspace(float(a), float(b), int(n))
+        return np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise InputError(f"expected a,b,c or START:STOP:NUM, got {text!r}",
+                         location=option) from None
+
+
+def _cmd_valve_table(args: argparse.Namespace) -> int:
+    prm = PlantParams.from_toml(args.plant)
+    cmd = ["workbench", "identify", "valve-table", str(args.plant), "--out", str(args.out),
+           "--leakage", repr(args.leakage), "--noise", repr(args.noise), "--seed", str(args.seed)]
+    cmd += ["--u", args.u] if args.u is not None else ["--n-u", str(args.n_u)]
+    cmd += ["--p", args.p] if args.p is not None else ["--n-p", str(args.n_p)]
+    made_with = " ".join(shlex.quote(c) for c in cmd)
+    center, span = prm["valve.command_center"], prm["valve.command_span"]
+    u = (centre_dense_commands(center, span, args.n_u) if args.u is None
+         else _float_list(args.u, "--u"))
+    p = (np.linspace(prm["gas.atmospheric_pressure"], prm["supply.pressure"], args.n_p)
+         if args.p is None else _float_list(args.p, "--p"))
+    table = generate_valve_table(prm, u, p, leakage=args.leakage, noise=args.noise,
+                                 seed=args.seed, made_with=made_with)
+    table.to_csv(args.out)
+    print(f"wrote {args.out}: {len(table)} points")
+    return 0
