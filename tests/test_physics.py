@@ -209,7 +209,13 @@ def test_iso6358_mpye_5_1_4_datasheet_flow():
     # Independent conversion: kg/s -> m^3/s at 1.185 kg/m^3 -> l/min.
     assert l_min == pytest.approx(q / RHO0 * 1000.0 * 60.0, rel=1e-15)
     assert l_min == pytest.approx(1400.0, rel=0.10)
-    assert l_min == pytest.approx(1523.0, rel=2e-3)   # what C, b give (see docstring)
+    # What C, b give (see docstring), by hand: x = 6/7, psi = sqrt(1 - ((x - b)/(1 - b))^2)
+    # = 0.58020, q = C p1 rho0 psi = 30.08 g/s = 1523.0 l/min ANR; the package's psi
+    # is another arrangement of the same formula (roundoff, 1e-12).
+    x = 6.0 / 7.0
+    psi = math.sqrt(1.0 - ((x - 0.23) / (1.0 - 0.23)) ** 2)
+    assert l_min == pytest.approx(6.25e-8 * 7e5 * RHO0 * psi / RHO0 * 60e3, rel=1e-12)
+    assert round(l_min, 1) == 1523.0
 
 
 # ====================================================================== nozzle law
