@@ -489,24 +489,30 @@ def test_plant_leakage_rows(tmp_path):
     assert d["p_a"] < 0                      # both leaks empty the high chamber
 
 
-def test_plant_heat_transfer_rows_with_open_valve_and_cross_leak(tmp_path):
-    """Energy balance of each chamber (see :func:`energy_balance`): supply air enters A at
-    the gas temperature, B exhausts its own gas, the cross leak carries B's gas into A
-    (p_b > p_a) and the walls are at the gas temperature."""
+@pytest.mark.parametrize("p_a, p_b, t_a, t_b, u, v", [
+    (2.2e5, 3.5e5, 310.0, 275.0, 7.0, 0.1),      # fill A, exhaust B, cross leak b -> a
+    (4.1e5, 1.8e5, 270.0, 335.0, 2.5, -0.2),     # exhaust A, fill B, cross leak a -> b
+])
+def test_plant_heat_transfer_rows_with_open_valve_and_cross_leak(tmp_path, p_a, p_b, t_a, t_b,
+                                                                 u, v):
+    """Energy balance of each chamber (see :func:`energy_balance`): supply air enters at
+    the gas temperature, an exhausting chamber loses its own gas, the cross leak carries
+    the upstream chamber's gas (at that chamber's temperature) and the walls are at the
+    gas temperature."""
     plant = _plant(tmp_path, ["heat_transfer", "leakage"])
-    h, c_atm, c_x = 0.5, 1e-10, 1e-9
-    x, v, p_a, p_b, t_a, t_b, u = 0.2, 0.1, 2.2e5, 3.5e5, 310.0, 275.0, 7.0
+    h, c_atm, c_x, x = 0.5, 1e-10, 1e-9, 0.2
     d = _f(plant, {"x": x, "v": v, "p_a": p_a, "p_b": p_b, "T_a": t_a, "T_b": t_b}, u)
-    o = (u - 5.0) / 5.0
-    q_sa = o * iso(C_V, B_V, 6e5, p_a, _T, t_a)
-    q_be = o * iso(C_V, B_V, p_b, P_ATM, t_b, T0)
-    cross = c_x * (p_b - p_a)                # b -> a
-    leak_a, leak_b = iso(c_atm, B_NOZZLE, p_a, P_ATM, t_a, t_a), iso(c_atm, B_NOZZLE, p_b,
-                                                                      P_ATM, t_b, t_b)
+    q_a, q_b, _ = four_edge_hand((u - 5.0) / 5.0, 6e5, p_a, p_b, _T, t_a, t_b)
+    cross = c_x * (p_a - p_b)                # > 0: a -> b
+    leak_a = iso(c_atm, B_NOZZLE, p_a, P_ATM, t_a, t_a)
+    leak_b = iso(c_atm, B_NOZZLE, p_b, P_ATM, t_b, t_b)
     v_a, v_b = _V_DEAD + _AREA * x, _V_DEAD + _AREA * (0.5 - x)
-    dp_a, dt_a = energy_balance(p_a, t_a, v_a, _AREA * v, [(q_sa, _T), (cross, t_b)],
-                                leak_a, h, _T)
-    dp_b, dt_b = energy_balance(p_b, t_b, v_b, -_AREA * v, [], q_be + cross + leak_b, h, _T)
+    in_a = [(max(q_a, 0.0), _T), (max(-cross, 0.0), t_b)]
+    in_b = [(max(q_b, 0.0), _T), (max(cross, 0.0), t_a)]
+    out_a = max(-q_a, 0.0) + max(cross, 0.0) + leak_a
+    out_b = max(-q_b, 0.0) + max(-cross, 0.0) + leak_b
+    dp_a, dt_a = energy_balance(p_a, t_a, v_a, _AREA * v, in_a, out_a, h, _T)
+    dp_b, dt_b = energy_balance(p_b, t_b, v_b, -_AREA * v, in_b, out_b, h, _T)
     assert (d["p_a"], d["p_b"]) == pytest.approx((dp_a, dp_b), rel=1e-11)
     # dT/dt: differences of large terms, roundoff relative to R T q / (c_v m) ~ 1e3 K/s
     assert (d["T_a"], d["T_b"]) == pytest.approx((dt_a, dt_b), rel=1e-9, abs=1e-7)
@@ -536,6 +542,12 @@ def test_plant_supply_droop_row(tmp_path):
     # the chamber is fed from the reservoir's pressure, not the set pressure
     v_b = _V_DEAD + _AREA * (0.5 - x)
     assert d["p_b"] == pytest.approx(_K * R * _T / v_b * q_sup, rel=REL)
+    # outputs: the reservoir pressure, the supply draw and the piston force (rodless)
+    y = dict(zip(plant.output_names, plant.evaluate_h(
+        [x, 0.0, p_a, p_b, p_s], u)))
+    assert y["p_s"] == p_s
+    assert y["q_supply"] == pytest.approx(q_sup, rel=REL)
+    assert y["force"] == pytest.approx(_AREA * (p_a - p_b), rel=REL)
 
 
 def test_plant_line_rows(tmp_path):
