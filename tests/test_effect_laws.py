@@ -68,7 +68,7 @@ def test_leak_below_atmosphere_draws_air_in():
     q = supply.leak_to_atmosphere(p, P_ATM, c, 293.15)
     assert q < 0
     assert q == pytest.approx(iso(c, B_NOZZLE, p, P_ATM), rel=REL)
-    # The leak uses the given critical ratio: with b = 0.6, 1.3 bar -> 1 atm is choked.
+    # The leak uses the given critical ratio: with b = 0.8, 1.3 bar -> 1 atm is choked.
     q_b = supply.leak_to_atmosphere(1.3e5, P_ATM, c, 293.15, b=0.8)
     assert q_b == pytest.approx(c * 1.3e5 * RHO0, rel=REL)
 
@@ -623,3 +623,30 @@ def test_plant_end_stop_row(tmp_path):
     w = 2 * math.pi * piston.STOP_FREQUENCY
     stop = -1.2 * w * w * x - 2 * piston.STOP_DAMPING * 1.2 * w * v
     assert d["v"] == pytest.approx((stop - BETA * v) / 1.2, rel=REL)
+
+
+def test_plant_input_affine_rows():
+    """Paper 003's law at both ports (port b mirrored) feeding the polytropic chambers,
+    with a leakage phi and a degree-2 Gamma so that every coefficient shows."""
+    from conftest import DATA
+    plant = Plant.from_toml(DATA / "input_affine.toml").with_params(
+        **{"valve.affine_phi": [1e-5, -2e-6], "valve.affine_gamma": [1.1, -0.2]})
+    prm = plant.params
+    phi, g = (1e-5, -2e-6), (1.1, -0.2)
+    psi_in, psi_out = prm["valve.affine_psi_in"], prm["valve.affine_psi_out"]
+
+    def poly(c, x):
+        return sum(ci * x ** i for i, ci in enumerate(c))
+
+    x, v, p_a, p_b = 0.3, 0.05, 3.2e5, 2.4e5
+    for u in (6.5, 3.0):
+        o = (u - 5.0) / 5.0
+        gam = g[0] * o + g[1] * o * abs(o)
+        q_a = poly(phi, 3.2) + poly(psi_in if gam >= 0 else psi_out, 3.2) * gam
+        q_b = poly(phi, 2.4) + poly(psi_in if -gam >= 0 else psi_out, 2.4) * -gam
+        assert (q_a > 0 > q_b) == (u > 5.0)
+        d = _f(plant, {"x": x, "v": v, "p_a": p_a, "p_b": p_b}, u)
+        v_a, v_b = _V_DEAD + _AREA * x, _V_DEAD + _AREA * (0.5 - x)
+        # polytropic chambers (physics.md): dp/dt = k/V (r T q - p dV/dt)
+        assert d["p_a"] == pytest.approx(_K / v_a * (R * _T * q_a - p_a * _AREA * v), rel=REL)
+        assert d["p_b"] == pytest.approx(_K / v_b * (R * _T * q_b + p_b * _AREA * v), rel=REL)
