@@ -22,7 +22,7 @@ import pytest
 from workbench import Plant
 from workbench.physics import chamber, friction, line, piston, supply, valve
 
-from conftest import write_plant
+from conftest import DATA, write_plant
 
 # Air and ISO 6358 reference conditions, typed from physics.md (not imported).
 R = 287.0
@@ -628,7 +628,6 @@ def test_plant_end_stop_row(tmp_path):
 def test_plant_input_affine_rows():
     """Paper 003's law at both ports (port b mirrored) feeding the polytropic chambers,
     with a leakage phi and a degree-2 Gamma so that every coefficient shows."""
-    from conftest import DATA
     plant = Plant.from_toml(DATA / "input_affine.toml").with_params(
         **{"valve.affine_phi": [1e-5, -2e-6], "valve.affine_gamma": [1.1, -0.2]})
     prm = plant.params
