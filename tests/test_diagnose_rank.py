@@ -13,7 +13,8 @@ known answer, computed in the test from the formulas of that module's docstring
   closed-loop cost does not rise by more than 25 %;
 * order: significant ones first, then by dBIC, best first;
 * BIC weights ``exp(dBIC_i / 2) / (1 + sum_j exp(dBIC_j / 2))`` (the 1 is the
-  nominal model, "nothing to add", whose dBIC is 0; Burnham & Anderson 2002, 6.4.1);
+  nominal model, "nothing to add", whose dBIC is 0: Schwarz weights, Burnham &
+  Anderson 2002, ch. 6);
 * the greedy choice of findings (:func:`~workbench.diagnose.explain.choose`) with a
   stand-in for the refits that returns hand-written results.
 
@@ -44,8 +45,8 @@ from workbench.diagnose.refit import FitResult, _at_bound
 
 REL = 1e-12
 
-#: The thresholds as the module docstring and the diagnosis README state them,
-#: written out here so that a changed threshold is seen.
+#: The thresholds of explain.py (smallest dBIC, smallest gain, largest closed-loop
+#: loss), written out here so that a changed threshold is seen.
 DBIC_MIN, GAIN_MIN, SEG_WORSE = 10.0, 0.25, -0.25
 
 
