@@ -7,9 +7,10 @@ drawn (seeded) from realistic ranges. The diagnosis gets only the nominal plant 
 and the CSV. Recordings are made once per test session.
 
 Tolerances: the fitted value of the checked keys within 30 % of the concealed one
-(the issue's bound); "fit improves": the mean fit over the recorded signals rises and
-no signal loses more than 0.5 percentage points (a pressure-only effect may leave the
-position fit at 99.9 % unchanged within rounding).
+(the issue's bound), for the keys of ``synth.CHECKED_KEYS`` and :data:`ALSO_CHECKED`;
+exactly one finding (one effect is concealed); "fit improves": the mean fit over the
+recorded signals rises and no signal loses more than 0.5 percentage points (a
+pressure-only effect may leave the position fit at 99.9 % unchanged within rounding).
 """
 
 from __future__ import annotations
@@ -29,6 +30,16 @@ DURATION = 20.0
 CASES = [("none", 3), ("dry_friction", 3), ("valve_deadband", 3), ("valve_offset", 3),
          ("valve_dynamics", 3), ("line_dynamics", 3), ("leakage", 3), ("supply_droop", 3),
          ("heat_transfer", 3), ("mass_error", 3)]
+
+#: Fitted values checked here (besides ``synth.CHECKED_KEYS``), each within 30 % of the
+#: concealed value (the issue's bound), computed in the test from the JSON: every
+#: concealed value that the recording identifies (the Stribeck velocity of dry
+#: friction is left out: it shapes only the few ms after break-away).
+ALSO_CHECKED = {"dry_friction": ("friction.static",),
+                "valve_dynamics": ("valve.bandwidth", "valve.damping"),
+                "line_dynamics": ("lines.length", "lines.diameter"),
+                "supply_droop": ("supply.reservoir_volume", "supply.regulator_conductance"),
+                "heat_transfer": ("gas.heat_transfer_coefficient",)}
 
 _CACHE: dict[tuple, tuple] = {}
 
@@ -71,6 +82,12 @@ def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
         assert res["fit_after"] == res["fit_before"]
         return
     assert sc["checked_ok"], f"fitted values off by {sc['relative_errors']}: {info}"
+    # one effect is concealed: nothing else may be named
+    assert len(res["findings"]) == 1, info
+    par = res["findings"][0]["parameters"]
+    for key in ALSO_CHECKED.get(kind, ()):
+        true = case.values[key]
+        assert abs(par[key.split(".", 1)[1]] - true) <= 0.3 * abs(true), f"{key}: {info}"
     assert _fit_improved(res["fit_before"], res["fit_after"]), \
         f"fit before {res['fit_before']} after {res['fit_after']}"
     f0 = res["findings"][0]
