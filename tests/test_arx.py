@@ -444,3 +444,97 @@ def test_residual_tests_hold_their_level_and_see_colour_and_feedthrough():
         assert (p >= WHITENESS_LEVEL) is ok and dof == m + 1
         lags, r_eu = cross_correlation(e, u, m)
         assert lags.tolist() == list(range(-m, m + 1)) and r_eu.shape == (2 * m + 1,)
+
+
+# --------------------------------------------------------------------------------------
+# Statistics as advertised (issue 17): exact values on constructed data
+# --------------------------------------------------------------------------------------
+def test_statistics_by_hand_on_a_four_sample_fir():
+    """FIR y = b u + e, orders (0, 1, 0), on u = [1, -1, 1, -1], y = [2, -1, 3, -2].
+
+    By hand: b = sum(u y) / sum(u^2) = 8 / 4 = 2; residuals [0, 1, 1, 0], sse = 2;
+    N = 4 equations, d = 1. Docstring of ArxModel (Ljung, System Identification,
+    2nd ed., 7.4 and 16.4): sigma^2 = sse / (N - d) = 2/3, V = sse / N = 1/2,
+    std_b = sqrt(sigma^2 / sum(u^2)) = sqrt(1/6), FPE = V (1 + d/N) / (1 - d/N) = 5/6,
+    AIC = N ln V + 2 d = 4 ln(1/2) + 2, BIC = N ln V + d ln N = 4 ln(1/2) + ln 4.
+    Tolerance 1e-12: exact rationals, only rounding of the SVD solve.
+    """
+    m = fit_arx([2.0, -1.0, 3.0, -2.0], [1.0, -1.0, 1.0, -1.0], orders=(0, 1, 0))
+    tol = dict(rel=1e-12, abs=1e-14)
+    assert m.b[0] == pytest.approx(2.0, **tol) and m.n_samples == 4
+    assert m.noise_variance == pytest.approx(2.0 / 3.0, **tol)      # sse / N would be 1/2
+    assert m.loss == pytest.approx(0.5, **tol)
+    assert m.std_b[0] == pytest.approx(np.sqrt(1.0 / 6.0), **tol)  # sqrt(1/8) without dof
+    assert m.covariance[0, 0] == pytest.approx(1.0 / 6.0, **tol)
+    assert m.fpe == pytest.approx(5.0 / 6.0, **tol)                 # inverted: 0.3
+    assert m.aic == pytest.approx(4 * np.log(0.5) + 2, **tol)
+    assert m.bic == pytest.approx(4 * np.log(0.5) + np.log(4), **tol)
+    d = m.to_dict()
+    assert d["noise_variance"] == pytest.approx(2.0 / 3.0, **tol)
+    assert d["std_b"][0] == pytest.approx(np.sqrt(1.0 / 6.0), **tol)
+    assert (d["loss"], d["fpe"]) == pytest.approx((0.5, 5.0 / 6.0), **tol)
+    assert (d["aic"], d["bic"]) == pytest.approx((m.aic, m.bic), **tol)
+
+
+def _lstsq_reference(y, u, na, nb, nk, start, offset=False):
+    """Least squares by numpy.linalg.lstsq on regressors built here, and the textbook
+    statistics (Ljung 16.4) with d = na + nb (+1 for the offset)."""
+    rows = []
+    for k in range(start, y.size):
+        row = [-y[k - i] for i in range(1, na + 1)] + [u[k - nk - j] for j in range(nb)]
+        rows.append(row + ([1.0] if offset else []))
+    phi, target = np.array(rows), y[start:]
+    theta = np.linalg.lstsq(phi, target, rcond=None)[0]
+    n, d = phi.shape
+    sse = float(np.sum((target - phi @ theta) ** 2))
+    s2 = sse / (n - d)
+    cov = s2 * np.linalg.inv(phi.T @ phi)
+    v = sse / n
+    return dict(theta=theta, sigma2=s2, cov=cov, loss=v, n=n,
+                aic=n * np.log(v) + 2 * d, bic=n * np.log(v) + d * np.log(n),
+                fpe=v * (1 + d / n) / (1 - d / n))
+
+
+@pytest.mark.parametrize("orders, offset", [((2, 2, 1), False), ((1, 2, 0), True)])
+def test_statistics_equal_lstsq_on_short_noisy_data(orders, offset):
+    """N = 30 samples, d = 4: the dof correction is 4/26 = 15 % here, far above the
+    1e-9 relative tolerance (lstsq and the SVD solve differ by rounding only)."""
+    rng = np.random.default_rng(17)
+    u = rng.standard_normal(30)
+    y = lfilter([0.0, 0.5, 0.2], [1.0, -0.6, 0.1], u) + 0.1 * rng.standard_normal(30) + 0.3
+    na, nb, nk = orders
+    m = fit_arx(y, u, orders=orders, offset=offset)
+    ref = _lstsq_reference(y, u, na, nb, nk, max(na, nk + nb - 1), offset)
+    k = na + nb
+    np.testing.assert_allclose(m.theta, ref["theta"][:k], rtol=1e-9)
+    assert m.n_samples == ref["n"]
+    assert m.noise_variance == pytest.approx(ref["sigma2"], rel=1e-9)
+    np.testing.assert_allclose(m.covariance, ref["cov"][:k, :k], rtol=1e-8)
+    np.testing.assert_allclose(np.concatenate([m.std_a, m.std_b]),
+                               np.sqrt(np.diag(ref["cov"]))[:k], rtol=1e-9)
+    for name in ("loss", "aic", "bic", "fpe"):
+        assert getattr(m, name) == pytest.approx(ref[name], rel=1e-9), name
+
+
+def test_order_selection_table_values_equal_lstsq():
+    """Every candidate's loss/AIC/BIC/FPE is the textbook value on the common
+    equations (from the grid's largest max lag), d = na + nb; the criteria pick
+    the minimum of the hand values; to_dict carries the same numbers."""
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal(40)
+    y = lfilter([0.0, 0.5], [1.0, -0.7], u) + 0.05 * rng.standard_normal(40)
+    sel = select_order(y, u, range(1, 3), range(1, 3), range(1, 2), criterion="fpe")
+    start = 2                                      # max lag of (2, 2, 1)
+    refs = {}
+    for c, row in zip(sel.candidates, sel.to_dict()["candidates"]):
+        ref = _lstsq_reference(y, u, c.na, c.nb, c.nk, start)
+        refs[c.orders] = ref
+        assert c.n_parameters == c.na + c.nb == row["n_parameters"]
+        for name in ("loss", "aic", "bic", "fpe"):
+            assert getattr(c, name) == pytest.approx(ref[name], rel=1e-9), name
+            assert row[name] == pytest.approx(ref[name], rel=1e-9), name
+    for crit in ("aic", "bic", "fpe"):
+        want = min(refs, key=lambda o: (refs[o][crit], sum(o[:2])))
+        got = sel.orders if crit == "fpe" else select_order(
+            y, u, range(1, 3), range(1, 3), range(1, 2), criterion=crit).orders
+        assert got == want, crit
