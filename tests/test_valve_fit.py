@@ -660,3 +660,33 @@ def test_valve_json_tank_steps(valve_json):
         want = 100.0 * np.max(np.abs(traj[(lab, du)] - ref) / ref)
         # 2 Pa of integration error on pressures above 1e5 Pa: 2e-3 percent
         assert r["max_error_percent"] == pytest.approx(want, rel=0, abs=2e-3), (lab, du)
+
+
+def test_valve_json_degree_selection_values(capsys):
+    """--select: the cross-validated RMS of a few grid cells recomputed with numpy
+    lstsq on a design built here (the 5 folds are the documented shuffle with seed 0;
+    a polynomial space does not depend on how p and u are scaled, so any affine
+    variables give the same predictions: 1e-6 covers the conditioning), and the
+    choice = fewest coefficients within 2 % of the best CV RMS, from the JSON grid."""
+    assert main(["identify", "valve", str(TABLE), "--approx", "I", "--select", "--no-tank",
+                 "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)["degree_selection"]
+    assert (d["folds"], d["tolerance"]) == (5, 0.02)
+    assert d["n_values"] == list(range(1, 8)) and d["m_values"] == list(range(1, 13))
+    raw, _, _ = _table_columns()
+    u, p, q = raw.T
+    x, s = (p - 3.5e5) / 2.5e5, (u - CENTER) / SPAN
+    parts = np.array_split(np.random.default_rng(0).permutation(q.size), 5)
+    cv = np.array([[np.nan if v is None else v for v in row] for row in d["cv_rms_g_s"]]) / 1e3
+    for n, m in [(1, 1), (2, 5), (5, 10), (d["n"], d["m"])]:
+        A = np.column_stack([x ** i * s ** j for i in range(n + 1) for j in range(m + 1)])
+        sq = 0.0
+        for pt in parts:
+            train = np.setdiff1d(np.arange(q.size), pt)
+            sol = np.linalg.lstsq(A[train], q[train], rcond=None)[0]
+            sq += np.sum((A[pt] @ sol - q[pt]) ** 2)
+        assert cv[n - 1, m - 1] == pytest.approx(np.sqrt(sq / q.size), rel=1e-6), (n, m)
+    best = np.nanmin(cv)
+    ok = [((n + 1) * (m + 1), cv[n - 1, m - 1], n, m) for n in d["n_values"]
+          for m in d["m_values"] if cv[n - 1, m - 1] <= best * 1.02]
+    assert (d["n"], d["m"]) == min(ok)[2:]
