@@ -538,3 +538,110 @@ def test_order_selection_table_values_equal_lstsq():
         got = sel.orders if crit == "fpe" else select_order(
             y, u, range(1, 3), range(1, 3), range(1, 2), criterion=crit).orders
         assert got == want, crit
+
+
+def _read_csv_columns(path):
+    """The recording's columns, parsed here (formats.md section 3: '#' lines, header)."""
+    rows = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
+    names = rows[0].split(",")
+    data = np.array([[float(v) for v in ln.split(",")] for ln in rows[1:]])
+    return {n: data[:, i] for i, n in enumerate(names)}
+
+
+def _validation_by_hand(a, b, nk, yv, uv, y_off, u_off, lags=25):
+    """Simulation fit, one-step residuals, Ljung-Box and Ljung 16.6 independence test
+    written out (ARX recursion in deviations; covariances 1/N sum over the overlap)."""
+    from scipy import stats
+    from scipy.linalg import toeplitz
+    na, nb = len(a), len(b)
+    n0 = max(na, nk + nb - 1)
+    yd, ud = yv - y_off, uv - u_off
+    ys = yd.copy()
+    e = np.empty(yv.size - n0)
+    for k in range(n0, yv.size):
+        ar = sum(-a[i] * ys[k - 1 - i] for i in range(na))
+        ys[k] = ar + sum(b[j] * ud[k - nk - j] for j in range(nb))
+        e[k - n0] = yd[k] - sum(-a[i] * yd[k - 1 - i] for i in range(na)) \
+            - sum(b[j] * ud[k - nk - j] for j in range(nb))
+    y_tail = yv[n0:]
+    fit = 100 * (1 - np.linalg.norm(y_tail - (ys[n0:] + y_off)) / np.linalg.norm(y_tail - y_tail.mean()))
+    n = e.size
+    m = max(1, min(lags, n // 4))
+    ec, uc = e - e.mean(), uv[n0:] - uv[n0:].mean()
+    cov = lambda x, z, t: (x[t:] @ z[:n - t]) / n          # noqa: E731  1/N sum x(k) z(k-t)
+    r = np.array([cov(ec, ec, t) for t in range(m + 1)]) / cov(ec, ec, 0)
+    q = n * (n + 2) * np.sum(r[1:] ** 2 / (n - np.arange(1, m + 1)))
+    c = np.array([cov(ec, uc, t) for t in range(m + 1)]) / np.sqrt(cov(ec, ec, 0) * cov(uc, uc, 0))
+    ru = np.array([cov(uc, uc, t) for t in range(m + 1)]) / cov(uc, uc, 0)
+    s = n * c @ np.linalg.solve(toeplitz(ru), c)
+    return fit, stats.chi2.sf(q, m), stats.chi2.sf(s, m + 1)
+
+
+@pytest.mark.parametrize("offset", [False, True])
+def test_cli_json_every_value(recording_csv, capsys, offset):
+    """Every value `identify arx --json` prints, from the CSV parsed here: estimates and
+    statistics by numpy lstsq (Ljung 16.4), poles/zeros/DC gain from the polynomials,
+    fits and residual tests written out above, offsets by the documented rule (the
+    mean of the better-determined signal, the other from the equation's constant).
+    1e-9 relative: same sums, other order; p-values 1e-7 (chi-square tails)."""
+    from workbench.__main__ import main
+    argv = ["identify", "arx", str(recording_csv), "--input", "r", "--output", "x",
+            "--orders", "4", "1", "2", "--split", "0.5", "--json"]
+    assert main(argv + (["--offset"] if offset else [])) == 0
+    res = json.loads(capsys.readouterr().out)
+    cols = _read_csv_columns(recording_csv)
+    y, u = cols["x"], cols["r"]
+    ne = int(round(0.5 * y.size))
+    ye, ue, yv, uv = y[:ne], u[:ne], y[ne:], u[ne:]
+    ref = _lstsq_reference(ye, ue, 4, 1, 2, 4, offset)
+    a, b = ref["theta"][:4], ref["theta"][4:5]
+    assert (res["n_estimation"], res["n_validation"]) == (ne, y.size - ne)
+    assert res["orders"] == [4, 1, 2] and res["nk"] == 2 and res["offset"] is offset
+    assert (res["input"], res["output"], res["recording"]) == ("r", "x", str(recording_csv))
+    assert res["sample_time"] == pytest.approx(cols["t"][1] - cols["t"][0], rel=1e-12)
+    np.testing.assert_allclose(res["a"] + res["b"], np.concatenate([a, b]), rtol=1e-9)
+    np.testing.assert_allclose(res["std_a"] + res["std_b"], np.sqrt(np.diag(ref["cov"]))[:5],
+                               rtol=1e-8)
+    for name, key in (("noise_variance", "sigma2"), ("loss", "loss"), ("aic", "aic"),
+                      ("fpe", "fpe")):
+        assert res[name] == pytest.approx(ref[key], rel=1e-9), name
+    poles = np.roots(np.concatenate([[1.0], a]))
+    got = np.array([complex(*pr) for pr in res["poles"]])
+    np.testing.assert_allclose(np.sort_complex(got), np.sort_complex(poles), rtol=1e-7)
+    assert res["zeros"] == [] and res["stable"] is bool(np.all(np.abs(poles) < 1))
+    assert res["dc_gain"] == pytest.approx(b.sum() / (1 + a.sum()), rel=1e-8)
+    y_off = u_off = 0.0
+    if offset:
+        a1, b1, c = 1 + a.sum(), b.sum(), ref["theta"][-1]
+        if abs(b1) * np.std(ue) >= abs(a1) * np.std(ye):
+            y_off = np.mean(ye)
+            u_off = (a1 * y_off - c) / b1
+        else:
+            u_off = np.mean(ue)
+            y_off = (b1 * u_off + c) / a1
+    assert (res["y_offset"], res["u_offset"]) == pytest.approx((y_off, u_off), rel=1e-8, abs=1e-12)
+    fit_v, p_white, p_ind = _validation_by_hand(a, b, 2, yv, uv, y_off, u_off)
+    fit_e = _validation_by_hand(a, b, 2, ye, ue, y_off, u_off)[0]
+    assert res["fit_validation"] == pytest.approx(fit_v, rel=1e-9)
+    assert res["fit_estimation"] == pytest.approx(fit_e, rel=1e-9)
+    assert res["whiteness_p_value"] == pytest.approx(p_white, rel=1e-7)
+    assert res["independence_p_value"] == pytest.approx(p_ind, rel=1e-7)
+    assert res["residual_whiteness_ok"] is bool(p_white >= 0.01)
+    assert res["residual_independence_ok"] is bool(p_ind >= 0.01)
+
+
+def test_offset_rule_when_the_input_barely_acts():
+    """|B(1)| std(u) < |A(1)| std(y) (an output driven mostly by its noise): the
+    documented rule takes u_offset = mean(u) and y_offset = (B(1) u_off + c) / A(1),
+    with a, b, c from numpy lstsq here (1e-9: same normal equations)."""
+    rng = np.random.default_rng(3)
+    u = 5.0 + rng.standard_normal(200)
+    y = lfilter([0.0, 1e-3], [1.0, -0.5], u - 5.0) + 2.0 + lfilter([1.0], [1.0, -0.5],
+                                                                   rng.standard_normal(200))
+    m = fit_arx(y, u, (1, 1, 1), offset=True)
+    ref = _lstsq_reference(y, u, 1, 1, 1, 1, offset=True)
+    a1, b1, c = 1 + ref["theta"][0], ref["theta"][1], ref["theta"][2]
+    assert abs(b1) * np.std(u) < abs(a1) * np.std(y)           # the case under test
+    assert m.u_offset == pytest.approx(np.mean(u), rel=1e-12)
+    assert m.y_offset == pytest.approx((b1 * np.mean(u) + c) / a1, rel=1e-9)
+    assert m.to_dict()["y_offset"] == m.y_offset
