@@ -510,3 +510,33 @@ def test_cli_summary_every_value(tmp_path, capsys):
     assert s["files"] == {"estimates": str(out / "estimates.csv"),
                           "report": str(out / "report.md"), "summary": str(out / "summary.json")}
     assert s["recording"] == str(rec_path) and s["method"] in ("compiled", "casadi", "numpy")
+
+
+def test_cli_forgetting_choice_values(tmp_path, capsys):
+    """--forgetting auto: each candidate's mean squared a priori error after the
+    burn-in from the batch weighted least squares above (1e-6 relative, as in
+    test_cli_summary_every_value), rmse = sqrt(mse), the burn-in by its documented
+    default, the choice = smallest mse (ties to the larger lambda)."""
+    from workbench.__main__ import main
+    from workbench.recording import load_recording
+    rec_path = tmp_path / "rec.csv"
+    _write_recording(rec_path, n=300)
+    assert main(["identify", "rls", str(rec_path), "--orders", "2", "2", "1",
+                 "--forgetting", "auto", "--out", str(tmp_path / "o"), "--no-plot",
+                 "--json"]) == 0
+    ch = json.loads(capsys.readouterr().out)["forgetting_choice"]
+    rec = load_recording(rec_path)
+    y, u = rec["x"], rec["u"]
+    phi = np.array([[-y[k - 1], -y[k - 2], u[k - 1], u[k - 2]] for k in range(2, y.size)])
+    p0 = 1e4 / np.mean(phi ** 2, axis=0)
+    n = y.size - 2
+    burn = max(10 * 4, n // 10)
+    assert ch["burn_in"] == burn
+    want = {}
+    for row in ch["table"]:
+        lam = row["forgetting"]
+        e = _weighted_ls_reference(y, u, lam, p0, np.sum(p0) / lam)["errors"][burn:]
+        want[lam] = float(np.mean(e ** 2))
+        assert row["mse"] == pytest.approx(want[lam], rel=1e-6), lam
+        assert row["rmse"] == pytest.approx(np.sqrt(want[lam]), rel=1e-6), lam
+    assert ch["forgetting"] == min(want, key=lambda lam: (want[lam], -lam))
