@@ -645,3 +645,38 @@ def test_offset_rule_when_the_input_barely_acts():
     assert m.u_offset == pytest.approx(np.mean(u), rel=1e-12)
     assert m.y_offset == pytest.approx((b1 * np.mean(u) + c) / a1, rel=1e-9)
     assert m.to_dict()["y_offset"] == m.y_offset
+
+
+def test_order_selection_validation_columns_by_hand():
+    """validation_loss = mean squared one-step error on the held-out data and
+    validation_fit = simulation fit there (from the measured first max_lag outputs),
+    each written out with the candidate's own lstsq estimate; 'loss' and 'fit' pick
+    the best of those hand values (1e-9: rounding only)."""
+    rng = np.random.default_rng(9)
+    u = rng.standard_normal(120)
+    y = lfilter([0.0, 0.5, 0.25], [1.0, -0.6], u) + 0.05 * rng.standard_normal(120)
+    est, val = slice(0, 60), slice(60, None)
+    sel = select_order(y[est], u[est], range(1, 3), range(1, 3), range(1, 2),
+                       criterion="loss", validation=(y[val], u[val]))
+    yv, uv = y[val], u[val]
+    start = 2
+    hand = {}
+    for c in sel.candidates:
+        th = _lstsq_reference(y[est], u[est], c.na, c.nb, c.nk, start)["theta"]
+        a, b = th[:c.na], th[c.na:]
+        n0 = max(c.na, c.nk + c.nb - 1)
+        ys = yv.copy()
+        e = []
+        for k in range(n0, yv.size):
+            ex = sum(b[j] * uv[k - c.nk - j] for j in range(c.nb))
+            ys[k] = -sum(a[i] * ys[k - 1 - i] for i in range(c.na)) + ex
+            e.append(yv[k] + sum(a[i] * yv[k - 1 - i] for i in range(c.na)) - ex)
+        loss = float(np.mean(np.square(e)))
+        fit = 100 * (1 - np.linalg.norm(yv[n0:] - ys[n0:]) / np.linalg.norm(yv[n0:] - yv[n0:].mean()))
+        hand[c.orders] = (loss, fit)
+        assert c.validation_loss == pytest.approx(loss, rel=1e-9)
+        assert c.validation_fit == pytest.approx(fit, rel=1e-9)
+    assert sel.orders == min(hand, key=lambda o: (hand[o][0], o[0] + o[1]))
+    by_fit = select_order(y[est], u[est], range(1, 3), range(1, 3), range(1, 2),
+                          criterion="fit", validation=(y[val], u[val]))
+    assert by_fit.orders == max(hand, key=lambda o: (hand[o][1], -(o[0] + o[1])))
