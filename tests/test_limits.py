@@ -470,3 +470,18 @@ def test_cli_plant_json_every_value(capsys):
     _check_every_value(out, out["w0"], out["zeta"], out["sample_time"], kp * out["kv"],
                        out["kv"])
     assert out["sample_time"] == plant.params["controller.sample_time"]
+
+
+def test_cli_plant_json_notes_a_non_p_controller(capsys):
+    """The 25 mm rig's file has a PD controller: the JSON says the limits are for a P
+    controller with its kp, and every limit, margin and frequency still follows from
+    the written w0, zeta, T, kp and Kv (references of _check_every_value)."""
+    rig = ROOT / "designs" / "plants" / "rig25_mpye.toml"
+    assert main(["limits", str(rig), "--x", "0.25", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    prm = Plant.from_toml(rig).params
+    assert prm["controller.kind"] == "pd"
+    assert len(out["notes"]) == 1 and "pd" in out["notes"][0] and "P controller" in out["notes"][0]
+    assert out["kp"] == pytest.approx(prm["controller.kp"], rel=1e-12)
+    _check_every_value(out, out["w0"], out["zeta"], out["sample_time"],
+                       prm["controller.kp"] * out["kv"], out["kv"])
