@@ -444,3 +444,239 @@ def test_residual_tests_hold_their_level_and_see_colour_and_feedthrough():
         assert (p >= WHITENESS_LEVEL) is ok and dof == m + 1
         lags, r_eu = cross_correlation(e, u, m)
         assert lags.tolist() == list(range(-m, m + 1)) and r_eu.shape == (2 * m + 1,)
+
+
+# --------------------------------------------------------------------------------------
+# Statistics as advertised (issue 17): exact values on constructed data
+# --------------------------------------------------------------------------------------
+def test_statistics_by_hand_on_a_four_sample_fir():
+    """FIR y = b u + e, orders (0, 1, 0), on u = [1, -1, 1, -1], y = [2, -1, 3, -2].
+
+    By hand: b = sum(u y) / sum(u^2) = 8 / 4 = 2; residuals [0, 1, 1, 0], sse = 2;
+    N = 4 equations, d = 1. Docstring of ArxModel (Ljung, System Identification,
+    2nd ed., 7.4 and 16.4): sigma^2 = sse / (N - d) = 2/3, V = sse / N = 1/2,
+    std_b = sqrt(sigma^2 / sum(u^2)) = sqrt(1/6), FPE = V (1 + d/N) / (1 - d/N) = 5/6,
+    AIC = N ln V + 2 d = 4 ln(1/2) + 2, BIC = N ln V + d ln N = 4 ln(1/2) + ln 4.
+    Tolerance 1e-12: exact rationals, only rounding of the SVD solve.
+    """
+    m = fit_arx([2.0, -1.0, 3.0, -2.0], [1.0, -1.0, 1.0, -1.0], orders=(0, 1, 0))
+    tol = dict(rel=1e-12, abs=1e-14)
+    assert m.b[0] == pytest.approx(2.0, **tol) and m.n_samples == 4
+    assert m.noise_variance == pytest.approx(2.0 / 3.0, **tol)      # sse / N would be 1/2
+    assert m.loss == pytest.approx(0.5, **tol)
+    assert m.std_b[0] == pytest.approx(np.sqrt(1.0 / 6.0), **tol)  # sqrt(1/8) without dof
+    assert m.covariance[0, 0] == pytest.approx(1.0 / 6.0, **tol)
+    assert m.fpe == pytest.approx(5.0 / 6.0, **tol)                 # inverted: 0.3
+    assert m.aic == pytest.approx(4 * np.log(0.5) + 2, **tol)
+    assert m.bic == pytest.approx(4 * np.log(0.5) + np.log(4), **tol)
+    d = m.to_dict()
+    assert d["noise_variance"] == pytest.approx(2.0 / 3.0, **tol)
+    assert d["std_b"][0] == pytest.approx(np.sqrt(1.0 / 6.0), **tol)
+    assert (d["loss"], d["fpe"]) == pytest.approx((0.5, 5.0 / 6.0), **tol)
+    assert (d["aic"], d["bic"]) == pytest.approx((m.aic, m.bic), **tol)
+
+
+def _lstsq_reference(y, u, na, nb, nk, start, offset=False):
+    """Least squares by numpy.linalg.lstsq on regressors built here, and the textbook
+    statistics (Ljung 16.4) with d = na + nb (+1 for the offset)."""
+    rows = []
+    for k in range(start, y.size):
+        row = [-y[k - i] for i in range(1, na + 1)] + [u[k - nk - j] for j in range(nb)]
+        rows.append(row + ([1.0] if offset else []))
+    phi, target = np.array(rows), y[start:]
+    theta = np.linalg.lstsq(phi, target, rcond=None)[0]
+    n, d = phi.shape
+    sse = float(np.sum((target - phi @ theta) ** 2))
+    s2 = sse / (n - d)
+    cov = s2 * np.linalg.inv(phi.T @ phi)
+    v = sse / n
+    return dict(theta=theta, sigma2=s2, cov=cov, loss=v, n=n,
+                aic=n * np.log(v) + 2 * d, bic=n * np.log(v) + d * np.log(n),
+                fpe=v * (1 + d / n) / (1 - d / n))
+
+
+@pytest.mark.parametrize("orders, offset", [((2, 2, 1), False), ((1, 2, 0), True)])
+def test_statistics_equal_lstsq_on_short_noisy_data(orders, offset):
+    """N = 30 samples, d = 4: the dof correction is 4/26 = 15 % here, far above the
+    1e-9 relative tolerance (lstsq and the SVD solve differ by rounding only)."""
+    rng = np.random.default_rng(17)
+    u = rng.standard_normal(30)
+    y = lfilter([0.0, 0.5, 0.2], [1.0, -0.6, 0.1], u) + 0.1 * rng.standard_normal(30) + 0.3
+    na, nb, nk = orders
+    m = fit_arx(y, u, orders=orders, offset=offset)
+    ref = _lstsq_reference(y, u, na, nb, nk, max(na, nk + nb - 1), offset)
+    k = na + nb
+    np.testing.assert_allclose(m.theta, ref["theta"][:k], rtol=1e-9)
+    assert m.n_samples == ref["n"]
+    assert m.noise_variance == pytest.approx(ref["sigma2"], rel=1e-9)
+    np.testing.assert_allclose(m.covariance, ref["cov"][:k, :k], rtol=1e-8)
+    np.testing.assert_allclose(np.concatenate([m.std_a, m.std_b]),
+                               np.sqrt(np.diag(ref["cov"]))[:k], rtol=1e-9)
+    for name in ("loss", "aic", "bic", "fpe"):
+        assert getattr(m, name) == pytest.approx(ref[name], rel=1e-9), name
+
+
+def test_order_selection_table_values_equal_lstsq():
+    """Every candidate's loss/AIC/BIC/FPE is the textbook value on the common
+    equations (from the grid's largest max lag), d = na + nb; the criteria pick
+    the minimum of the hand values; to_dict carries the same numbers."""
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal(40)
+    y = lfilter([0.0, 0.5], [1.0, -0.7], u) + 0.05 * rng.standard_normal(40)
+    sel = select_order(y, u, range(1, 3), range(1, 3), range(1, 2), criterion="fpe")
+    start = 2                                      # max lag of (2, 2, 1)
+    refs = {}
+    for c, row in zip(sel.candidates, sel.to_dict()["candidates"]):
+        ref = _lstsq_reference(y, u, c.na, c.nb, c.nk, start)
+        refs[c.orders] = ref
+        assert c.n_parameters == c.na + c.nb == row["n_parameters"]
+        for name in ("loss", "aic", "bic", "fpe"):
+            assert getattr(c, name) == pytest.approx(ref[name], rel=1e-9), name
+            assert row[name] == pytest.approx(ref[name], rel=1e-9), name
+    for crit in ("aic", "bic", "fpe"):
+        want = min(refs, key=lambda o: (refs[o][crit], sum(o[:2])))
+        got = sel.orders if crit == "fpe" else select_order(
+            y, u, range(1, 3), range(1, 3), range(1, 2), criterion=crit).orders
+        assert got == want, crit
+
+
+def _read_csv_columns(path):
+    """The recording's columns, parsed here (formats.md section 3: '#' lines, header)."""
+    rows = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
+    names = rows[0].split(",")
+    data = np.array([[float(v) for v in ln.split(",")] for ln in rows[1:]])
+    return {n: data[:, i] for i, n in enumerate(names)}
+
+
+def _validation_by_hand(a, b, nk, yv, uv, y_off, u_off, lags=25):
+    """Simulation fit, one-step residuals, Ljung-Box and Ljung 16.6 independence test
+    written out (ARX recursion in deviations; covariances 1/N sum over the overlap)."""
+    from scipy import stats
+    from scipy.linalg import toeplitz
+    na, nb = len(a), len(b)
+    n0 = max(na, nk + nb - 1)
+    yd, ud = yv - y_off, uv - u_off
+    ys = yd.copy()
+    e = np.empty(yv.size - n0)
+    for k in range(n0, yv.size):
+        ar = sum(-a[i] * ys[k - 1 - i] for i in range(na))
+        ys[k] = ar + sum(b[j] * ud[k - nk - j] for j in range(nb))
+        e[k - n0] = yd[k] - sum(-a[i] * yd[k - 1 - i] for i in range(na)) \
+            - sum(b[j] * ud[k - nk - j] for j in range(nb))
+    y_tail = yv[n0:]
+    fit = 100 * (1 - np.linalg.norm(y_tail - (ys[n0:] + y_off)) / np.linalg.norm(y_tail - y_tail.mean()))
+    n = e.size
+    m = max(1, min(lags, n // 4))
+    ec, uc = e - e.mean(), uv[n0:] - uv[n0:].mean()
+    cov = lambda x, z, t: (x[t:] @ z[:n - t]) / n          # noqa: E731  1/N sum x(k) z(k-t)
+    r = np.array([cov(ec, ec, t) for t in range(m + 1)]) / cov(ec, ec, 0)
+    q = n * (n + 2) * np.sum(r[1:] ** 2 / (n - np.arange(1, m + 1)))
+    c = np.array([cov(ec, uc, t) for t in range(m + 1)]) / np.sqrt(cov(ec, ec, 0) * cov(uc, uc, 0))
+    ru = np.array([cov(uc, uc, t) for t in range(m + 1)]) / cov(uc, uc, 0)
+    s = n * c @ np.linalg.solve(toeplitz(ru), c)
+    return fit, stats.chi2.sf(q, m), stats.chi2.sf(s, m + 1)
+
+
+@pytest.mark.parametrize("offset", [False, True])
+def test_cli_json_every_value(recording_csv, capsys, offset):
+    """Every value `identify arx --json` prints, from the CSV parsed here: estimates and
+    statistics by numpy lstsq (Ljung 16.4), poles/zeros/DC gain from the polynomials,
+    fits and residual tests written out above, offsets by the documented rule (the
+    mean of the better-determined signal, the other from the equation's constant).
+    1e-9 relative: same sums, other order; p-values 1e-7 (chi-square tails)."""
+    from workbench.__main__ import main
+    argv = ["identify", "arx", str(recording_csv), "--input", "r", "--output", "x",
+            "--orders", "4", "1", "2", "--split", "0.5", "--json"]
+    assert main(argv + (["--offset"] if offset else [])) == 0
+    res = json.loads(capsys.readouterr().out)
+    cols = _read_csv_columns(recording_csv)
+    y, u = cols["x"], cols["r"]
+    ne = int(round(0.5 * y.size))
+    ye, ue, yv, uv = y[:ne], u[:ne], y[ne:], u[ne:]
+    ref = _lstsq_reference(ye, ue, 4, 1, 2, 4, offset)
+    a, b = ref["theta"][:4], ref["theta"][4:5]
+    assert (res["n_estimation"], res["n_validation"]) == (ne, y.size - ne)
+    assert res["orders"] == [4, 1, 2] and res["nk"] == 2 and res["offset"] is offset
+    assert (res["input"], res["output"], res["recording"]) == ("r", "x", str(recording_csv))
+    assert res["sample_time"] == pytest.approx(cols["t"][1] - cols["t"][0], rel=1e-12)
+    np.testing.assert_allclose(res["a"] + res["b"], np.concatenate([a, b]), rtol=1e-9)
+    np.testing.assert_allclose(res["std_a"] + res["std_b"], np.sqrt(np.diag(ref["cov"]))[:5],
+                               rtol=1e-8)
+    for name, key in (("noise_variance", "sigma2"), ("loss", "loss"), ("aic", "aic"),
+                      ("fpe", "fpe")):
+        assert res[name] == pytest.approx(ref[key], rel=1e-9), name
+    poles = np.roots(np.concatenate([[1.0], a]))
+    got = np.array([complex(*pr) for pr in res["poles"]])
+    np.testing.assert_allclose(np.sort_complex(got), np.sort_complex(poles), rtol=1e-7)
+    assert res["zeros"] == [] and res["stable"] is bool(np.all(np.abs(poles) < 1))
+    assert res["dc_gain"] == pytest.approx(b.sum() / (1 + a.sum()), rel=1e-8)
+    y_off = u_off = 0.0
+    if offset:
+        a1, b1, c = 1 + a.sum(), b.sum(), ref["theta"][-1]
+        if abs(b1) * np.std(ue) >= abs(a1) * np.std(ye):
+            y_off = np.mean(ye)
+            u_off = (a1 * y_off - c) / b1
+        else:
+            u_off = np.mean(ue)
+            y_off = (b1 * u_off + c) / a1
+    assert (res["y_offset"], res["u_offset"]) == pytest.approx((y_off, u_off), rel=1e-8, abs=1e-12)
+    fit_v, p_white, p_ind = _validation_by_hand(a, b, 2, yv, uv, y_off, u_off)
+    fit_e = _validation_by_hand(a, b, 2, ye, ue, y_off, u_off)[0]
+    assert res["fit_validation"] == pytest.approx(fit_v, rel=1e-9)
+    assert res["fit_estimation"] == pytest.approx(fit_e, rel=1e-9)
+    assert res["whiteness_p_value"] == pytest.approx(p_white, rel=1e-7)
+    assert res["independence_p_value"] == pytest.approx(p_ind, rel=1e-7)
+    assert res["residual_whiteness_ok"] is bool(p_white >= 0.01)
+    assert res["residual_independence_ok"] is bool(p_ind >= 0.01)
+
+
+def test_offset_rule_when_the_input_barely_acts():
+    """|B(1)| std(u) < |A(1)| std(y) (an output driven mostly by its noise): the
+    documented rule takes u_offset = mean(u) and y_offset = (B(1) u_off + c) / A(1),
+    with a, b, c from numpy lstsq here (1e-9: same normal equations)."""
+    rng = np.random.default_rng(3)
+    u = 5.0 + rng.standard_normal(200)
+    y = lfilter([0.0, 1e-3], [1.0, -0.5], u - 5.0) + 2.0 + lfilter([1.0], [1.0, -0.5],
+                                                                   rng.standard_normal(200))
+    m = fit_arx(y, u, (1, 1, 1), offset=True)
+    ref = _lstsq_reference(y, u, 1, 1, 1, 1, offset=True)
+    a1, b1, c = 1 + ref["theta"][0], ref["theta"][1], ref["theta"][2]
+    assert abs(b1) * np.std(u) < abs(a1) * np.std(y)           # the case under test
+    assert m.u_offset == pytest.approx(np.mean(u), rel=1e-12)
+    assert m.y_offset == pytest.approx((b1 * np.mean(u) + c) / a1, rel=1e-9)
+    assert m.to_dict()["y_offset"] == m.y_offset
+
+
+def test_order_selection_validation_columns_by_hand():
+    """validation_loss = mean squared one-step error on the held-out data and
+    validation_fit = simulation fit there (from the measured first max_lag outputs),
+    each written out with the candidate's own lstsq estimate; 'loss' and 'fit' pick
+    the best of those hand values (1e-9: rounding only)."""
+    rng = np.random.default_rng(9)
+    u = rng.standard_normal(120)
+    y = lfilter([0.0, 0.5, 0.25], [1.0, -0.6], u) + 0.05 * rng.standard_normal(120)
+    est, val = slice(0, 60), slice(60, None)
+    sel = select_order(y[est], u[est], range(1, 3), range(1, 3), range(1, 2),
+                       criterion="loss", validation=(y[val], u[val]))
+    yv, uv = y[val], u[val]
+    start = 2
+    hand = {}
+    for c in sel.candidates:
+        th = _lstsq_reference(y[est], u[est], c.na, c.nb, c.nk, start)["theta"]
+        a, b = th[:c.na], th[c.na:]
+        n0 = max(c.na, c.nk + c.nb - 1)
+        ys = yv.copy()
+        e = []
+        for k in range(n0, yv.size):
+            ex = sum(b[j] * uv[k - c.nk - j] for j in range(c.nb))
+            ys[k] = -sum(a[i] * ys[k - 1 - i] for i in range(c.na)) + ex
+            e.append(yv[k] + sum(a[i] * yv[k - 1 - i] for i in range(c.na)) - ex)
+        loss = float(np.mean(np.square(e)))
+        fit = 100 * (1 - np.linalg.norm(yv[n0:] - ys[n0:]) / np.linalg.norm(yv[n0:] - yv[n0:].mean()))
+        hand[c.orders] = (loss, fit)
+        assert c.validation_loss == pytest.approx(loss, rel=1e-9)
+        assert c.validation_fit == pytest.approx(fit, rel=1e-9)
+    assert sel.orders == min(hand, key=lambda o: (hand[o][0], o[0] + o[1]))
+    by_fit = select_order(y[est], u[est], range(1, 3), range(1, 3), range(1, 2),
+                          criterion="fit", validation=(y[val], u[val]))
+    assert by_fit.orders == max(hand, key=lambda o: (hand[o][1], -(o[0] + o[1])))

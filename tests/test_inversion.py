@@ -262,3 +262,91 @@ def test_force_tracking_design_smoke(tmp_path):
     for heading in ("Pressure-trajectory inversion", "Force tracking in closed loop", "Provenance"):
         assert heading in html
     assert summary["metrics"]["nominal affine plant"]["max_error"] <= summary["bounds"]["max"]
+
+
+# ---------------------------------------------------------------------- Gamma of degree 2 and 3
+#: Odd, increasing characteristics (slope g1 + 2 g2 s + 3 g3 s^2 > 0 on [0, 1], as
+#: ValveInversion requires): degree 2 (closed form) and degree 3 (Newton branch).
+GAMMAS = [(0.7, 0.3), (0.5, 0.3, 0.2)]
+SKEWED = CommandMap(center=5.0, span=5.0, offset=0.1, deadband=0.03, u_min=0.0, u_max=10.0)
+
+
+def gamma_by_hand(s, g):
+    """Gamma(s) = g1 s + g2 s|s| + g3 s^3 (paper 003, approximation II), written out."""
+    s = np.asarray(s, dtype=float)
+    return sum(gk * s * np.abs(s) ** k for k, gk in enumerate(g))
+
+
+def opening_by_brentq(G, g):
+    """s with Gamma(s) = G on [-4, 4] by scipy's brentq (xtol 1e-15, rtol 4 eps)."""
+    from scipy.optimize import brentq
+    return np.array([brentq(lambda s: gamma_by_hand(s, g) - Gi, -4.0, 4.0, xtol=1e-15,
+                            rtol=4 * np.finfo(float).eps) for Gi in np.atleast_1d(G)])
+
+
+@pytest.fixture(scope="module", params=GAMMAS, ids=["degree2", "degree3"])
+def shaped(request, affine):
+    from dataclasses import replace
+    return replace(ValveInversion.from_plant(affine), gamma=request.param,
+                   commands=SKEWED)
+
+
+def test_opening_of_gamma_equals_brentq(shaped):
+    """Closed form (degree 2) and guarded Newton (degree 3) against brentq; both
+    reach rounding (bound 1e-12 on s in [-1.2, 1.2], brentq's own xtol is 1e-15)."""
+    g = shaped.gamma
+    G = np.linspace(-1.3, 1.3, 53) * sum(g)          # past Gamma(+-1) too
+    s, iters = shaped.opening_of_gamma(G)
+    np.testing.assert_allclose(s, opening_by_brentq(G, g), atol=1e-12)
+    np.testing.assert_allclose(gamma_by_hand(s, g), G, atol=1e-12)   # round trip
+    assert (iters == 0) if len(g) == 2 else (iters > 0)
+    np.testing.assert_allclose(shaped.gamma_of(s), gamma_by_hand(s, g), atol=1e-15)
+
+
+@pytest.mark.parametrize("side", ["a", "b"])
+def test_symbolic_command_with_shaped_gamma_equals_brentq(shaped, side):
+    """The CasADi inverse (closed form for degree 2, 8 Newton steps for degree 3)
+    against a command built here from brentq: G = (q - phi)/psi, s = Gamma^-1(G),
+    u = centre + offset + span (deadband + (1 - deadband) s) sign(s). Bound 1e-9 V:
+    8 Newton steps from s = |G|/g1 converge quadratically to rounding here."""
+    q, p = ca.SX.sym("q"), ca.SX.sym("p")
+    fun = ca.Function("u", [q, p], [shaped.symbolic_command(q, p, side)])
+    rng = np.random.default_rng(8)
+    pp = rng.uniform(1.3e5, 5.7e5, 40)
+    lo, hi = shaped.flow_range(pp, side)
+    qq = rng.uniform(lo, hi)
+    phi, pin, pout = shaped.terms(pp)
+    G = (qq - phi) / np.where(qq - phi >= 0, pin, pout)
+    s = opening_by_brentq(G, shaped.gamma) * (1 if side == "a" else -1)
+    cm = SKEWED
+    u_ref = cm.center + cm.offset + cm.span * np.sign(s) * (cm.deadband + (1 - cm.deadband) * np.abs(s))
+    sym = np.array([float(fun(a, b)) for a, b in zip(qq, pp)])
+    np.testing.assert_allclose(sym, u_ref, atol=1e-9)
+    np.testing.assert_allclose(shaped.invert(qq, pp, side).command, u_ref, atol=1e-9)
+
+
+@pytest.mark.parametrize("side", ["a", "b"])
+def test_command_for_gamma_saturation_flag(shaped, side):
+    """saturated is True exactly where G is outside [Gamma(s_lo), Gamma(s_hi)], the
+    openings reachable in [0, 10] V computed here from the command map by hand
+    (u = 10 V: spool (10 - 5.1)/5 = 0.98, opening (0.98 - 0.03)/0.97; u = 0 V: spool
+    clipped at -1, opening -1; port b sees -s). Inside, Gamma of the command's opening
+    is G (1e-12); outside, the command is the end of the range."""
+    g = shaped.gamma
+    s_hi, s_lo = (0.98 - 0.03) / 0.97, -1.0
+    if side == "b":
+        s_lo, s_hi = -s_hi, -s_lo
+    G_lo, G_hi = gamma_by_hand(s_lo, g), gamma_by_hand(s_hi, g)
+    G = np.concatenate([np.linspace(1.5 * G_lo, 1.5 * G_hi, 61),
+                        [G_lo, G_hi, G_lo - 1e-9, G_hi + 1e-9, 0.0]])
+    u, sat = shaped.command_for_gamma(G, side)
+    want = (G < G_lo) | (G > G_hi)
+    assert 10 < want.sum() < G.size - 10                 # both cases exercised
+    np.testing.assert_array_equal(sat, want)
+    opening = SKEWED.opening(u) * (1 if side == "a" else -1)
+    np.testing.assert_allclose(gamma_by_hand(opening[~want], g), G[~want], atol=1e-12)
+    ends = np.where(G[want] > 0, G_hi, G_lo)
+    np.testing.assert_allclose(gamma_by_hand(opening[want], g), ends, atol=1e-12)
+    for Gi in (1.01 * G_hi, 1.01 * G_lo, 0.99 * G_hi, 0.5 * G_lo):
+        ui, si = shaped.command_for_gamma(Gi, side)         # scalar form
+        assert isinstance(ui, float) and si is bool((Gi < G_lo) or (Gi > G_hi))

@@ -367,3 +367,121 @@ def test_cli_bad_arguments(argv, word, capsys):
     assert main(["limits", *argv]) == 2
     err = capsys.readouterr().err
     assert "workbench limits: error:" in err and word in err
+
+
+# ---------------------------------------------------------------------- every JSON value
+def _ref_crossing_frequency(num, den, T):
+    """rad/s of the oscillation at the sampled limit: bisect the limit on the poles of
+    python-control's loop, take the pole nearest the unit circle there, angle / T."""
+    k = _bisect_limit(num, den, rtol=1e-13)
+    char = den.copy()
+    char[den.size - num.size:] += k * num
+    r = np.roots(char)
+    z = r[np.argmin(np.abs(np.abs(r) - 1.0))]
+    return abs(np.angle(z)) / T
+
+
+def _ref_phase_margin(num, den, k0, T):
+    """Phase margin (deg) of k0 G(e^{jwT}) at its gain crossover, found by brentq."""
+    from scipy.optimize import brentq
+
+    def loop(w):
+        z = np.exp(1j * w * T)
+        return k0 * np.polyval(num, z) / np.polyval(den, z)
+    wc = brentq(lambda w: abs(loop(w)) - 1.0, 1e-3, math.pi / T * 0.999, xtol=1e-13)
+    return 180.0 + math.degrees(np.angle(loop(wc)))
+
+
+def _check_every_value(out, w0, zeta, T, k0, kv):
+    """Each key `workbench limits --json` writes, against a value computed here."""
+    num, den = _ref_discrete_loop(w0, zeta, T)
+    dnum, dden = _ref_discrete_loop(w0, zeta, T, delay=True)
+    ref = {"continuous": 2 * zeta * w0,                         # Hurwitz, closed form
+           "pct": 2 * zeta / (T / 2 + 1 / w0),                  # paper 000, PCT
+           "sampled": _bisect_limit(num, den, rtol=1e-12),
+           "sampled_delay": _bisect_limit(dnum, dden, rtol=1e-12)}
+    # bisection to 1e-12 against crossings refined by brentq: 1e-9 covers both
+    for key, value in ref.items():
+        assert out[key] == pytest.approx(value, rel=1e-9), key
+        assert out["kp_limits"][key] == pytest.approx(value / kv, rel=1e-9), key
+    assert out["k0"] == pytest.approx(k0, rel=1e-12)
+    assert out["kv"] == pytest.approx(kv, rel=1e-12)
+    assert out["kp"] == pytest.approx(k0 / kv, rel=1e-12)
+    assert (out["w0"], out["zeta"], out["sample_time"]) == pytest.approx((w0, zeta, T), rel=1e-12)
+    assert out["pct_time_constant_s"] == pytest.approx(T / 2 + 1 / w0, rel=1e-12)
+    # python-control's frd margin ~1e-9 (see test_table_ii_margins_agree_...)
+    assert out["gain_margin"] == pytest.approx(ref["sampled"] / k0, rel=1e-7)
+    assert out["phase_margin_deg"] == pytest.approx(_ref_phase_margin(num, den, k0, T), abs=1e-6)
+    # theta / T: the angle of the critical pole over the sample time (rad/s), below
+    # Nyquist pi / T; the pole's angle at a limit bisected to 1e-13 moves ~1e-7 rad/s
+    for key, (n, d) in (("sampled_frequency_rad_s", (num, den)),
+                        ("sampled_delay_frequency_rad_s", (dnum, dden))):
+        w = _ref_crossing_frequency(n, d, T)
+        assert 0.0 < w < math.pi / T
+        assert out[key] == pytest.approx(w, rel=1e-6), key
+
+
+def test_cli_model_json_every_value(capsys):
+    """Table II with kp = 10 V/m and Kv = 0.7 m/(V s) (K0 = 7 1/s): every key."""
+    assert main(["limits", "--w0", "32.97", "--zeta", "1.1", "--sample-time", "0.01",
+                 "--kp", "10", "--kv", "0.7", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) == {"k0", "continuous", "pct", "sampled", "sampled_delay",
+                        "gain_margin", "phase_margin_deg", "w0", "zeta", "sample_time",
+                        "pct_time_constant_s", "sampled_frequency_rad_s",
+                        "sampled_delay_frequency_rad_s", "kv", "kp", "kp_limits"}
+    _check_every_value(out, W0, ZETA, T, 7.0, 0.7)
+    # the crossing of the undelayed Table II loop by hand: G(e^{j theta}) real and
+    # negative; Im(N conj D) = 0 solved by brentq on python-control's polynomials
+    from scipy.optimize import brentq
+    num, den = _ref_discrete_loop(W0, ZETA, T)
+    im = lambda th: np.imag(np.polyval(num, np.exp(1j * th))                # noqa: E731
+                            * np.conj(np.polyval(den, np.exp(1j * th))))
+    theta = brentq(im, 0.05, 3.0, xtol=1e-15)
+    g = np.polyval(num, np.exp(1j * theta)) / np.polyval(den, np.exp(1j * theta))
+    assert -1.0 / g.real == pytest.approx(out["sampled"], rel=1e-9)
+    assert out["sampled_frequency_rad_s"] == pytest.approx(theta / T, rel=1e-9)
+
+
+def test_cli_plant_json_every_value(capsys):
+    """The situm plant at x = 0.25 m: w0, zeta, Kv from the exact tangent model
+    (its nonzero eigenvalues p1, p2: w0^2 = p1 p2, 2 zeta w0 = -(p1 + p2); Kv =
+    lim s G(s), evaluated at s = 1e-3 j, where the error is (1e-3 / 13.6)^2 ~ 1e-8),
+    then every key against the model route's references."""
+    assert main(["limits", str(SITUM), "--x", "0.25", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    plant = Plant.from_toml(SITUM)
+    lin = linearize.tangent(plant, x=0.25)
+    ev = np.linalg.eigvals(lin.A)
+    p1, p2 = ev[np.abs(ev) > 1e-6]
+    w0 = math.sqrt((p1 * p2).real)
+    zeta = -(p1 + p2).real / (2 * w0)
+    s = 1e-3j
+    ix = list(lin.output_names).index("x")
+    g = lin.C[ix] @ np.linalg.solve(s * np.eye(lin.A.shape[0]) - lin.A, lin.B[:, 0])
+    kv = abs(s * g)
+    # the reduced model is exact for this four-state drive: the fit reaches ~1e-9
+    assert out["w0"] == pytest.approx(w0, rel=1e-7)
+    assert out["zeta"] == pytest.approx(zeta, rel=1e-7)
+    assert out["kv"] == pytest.approx(kv, rel=1e-6)
+    kp = plant.params["controller.kp"]
+    assert out["kp"] == kp and out["plant"] == str(SITUM) and out["x"] == 0.25
+    assert out["notes"] == []                    # the file's controller is a P (kind = "p")
+    _check_every_value(out, out["w0"], out["zeta"], out["sample_time"], kp * out["kv"],
+                       out["kv"])
+    assert out["sample_time"] == plant.params["controller.sample_time"]
+
+
+def test_cli_plant_json_notes_a_non_p_controller(capsys):
+    """The 25 mm rig's file has a PD controller: the JSON says the limits are for a P
+    controller with its kp, and every limit, margin and frequency still follows from
+    the written w0, zeta, T, kp and Kv (references of _check_every_value)."""
+    rig = ROOT / "designs" / "plants" / "rig25_mpye.toml"
+    assert main(["limits", str(rig), "--x", "0.25", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    prm = Plant.from_toml(rig).params
+    assert prm["controller.kind"] == "pd"
+    assert len(out["notes"]) == 1 and "pd" in out["notes"][0] and "P controller" in out["notes"][0]
+    assert out["kp"] == pytest.approx(prm["controller.kp"], rel=1e-12)
+    _check_every_value(out, out["w0"], out["zeta"], out["sample_time"],
+                       prm["controller.kp"] * out["kv"], out["kv"])

@@ -429,3 +429,114 @@ def test_cli_detrend_removes_operating_point_offsets(tmp_path, capsys):
     assert summary["detrend"] == "mean"
     np.testing.assert_allclose(summary["a"], TRUE[:2], atol=0.05)
     np.testing.assert_allclose(summary["b"], 1e-3 * TRUE[2:], atol=5e-5)
+
+
+def _weighted_ls_reference(y, u, lam, p0, p_max):
+    """RLS with forgetting written as batch weighted least squares (Ljung, System
+    Identification, 11.2): after sample N the estimate minimises
+    sum_k w_k e_k^2 + w_0 theta' P0^-1 theta (theta0 = 0), w_k the product of the
+    forgetting factors applied after sample k, i.e. R_N theta = f_N with
+    R_N = l_N R_{N-1} + phi phi', f_N = l_N f_{N-1} + phi y, R_0 = P0^-1. The factor
+    is the documented trace bound l_N = min(1, max(lam, trace(R_{N-1}^-1) / p_max)).
+    The noise variance is the minimised cost over the effective degrees of freedom
+    sum w_k - trace(P M), M = sum w_k^2 phi phi', and the covariance is the
+    weighted-LS sandwich s^2 P M P. Regressors built here,
+    phi(k) = [-y(k-1), -y(k-2), u(k-1), u(k-2)] for orders (2, 2, 1)."""
+    phi = np.array([[-y[k - 1], -y[k - 2], u[k - 1], u[k - 2]] for k in range(2, y.size)])
+    target = y[2:]
+    R, f = np.diag(1.0 / p0), np.zeros(4)
+    M, ne = np.zeros((4, 4)), 0.0
+    errors, lks = np.empty(target.size), np.empty(target.size)
+    for k, (ph, yk) in enumerate(zip(phi, target)):
+        errors[k] = yk - ph @ np.linalg.solve(R, f)          # a priori: theta(k-1)
+        lk = lks[k] = min(1.0, max(lam, np.trace(np.linalg.inv(R)) / p_max))
+        R, f = lk * R + np.outer(ph, ph), lk * f + ph * yk
+        M, ne = lk ** 2 * M + np.outer(ph, ph), lk * ne + 1.0
+    theta = np.linalg.solve(R, f)
+    w = np.append(np.cumprod(lks[::-1])[::-1][1:], 1.0)      # w_k = prod_{j > k} l_j
+    w_prior = np.prod(lks)
+    cost = np.sum(w * (target - phi @ theta) ** 2) + w_prior * np.sum(theta ** 2 / p0)
+    P = np.linalg.inv(R)
+    s2 = cost / (ne - np.trace(P @ M))
+    return dict(theta=theta, errors=errors, s2=s2, cov=s2 * P @ M @ P,
+                bound_fraction=float(np.mean(lks > lam)))
+
+
+def test_cli_summary_every_value(tmp_path, capsys):
+    """Every number of summary.json (lambda = 0.98, --detrend mean, p0 auto) against
+    the batch weighted least squares above. Tolerances: the recursion and the batch
+    solve differ by rounding accumulated over 598 rank-one updates, 1e-7 relative on
+    the estimates and 1e-6 on variances and errors (the a priori errors of the first
+    samples are O(1), later ones O(1e-5): 1e-6 relative on their mean square)."""
+    from workbench.__main__ import main
+    from workbench.recording import load_recording
+    rec_path = tmp_path / "rec.csv"
+    _write_recording(rec_path)
+    out = tmp_path / "o"
+    assert main(["identify", "rls", str(rec_path), "--orders", "2", "2", "1",
+                 "--forgetting", "0.98", "--detrend", "mean", "--out", str(out),
+                 "--no-plot", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    s = json.loads((out / "summary.json").read_text())
+    assert s == printed
+    rec = load_recording(rec_path)
+    y, u = rec["x"] - np.mean(rec["x"]), rec["u"] - np.mean(rec["u"])
+    phi = np.array([[-y[k - 1], -y[k - 2], u[k - 1], u[k - 2]] for k in range(2, y.size)])
+    p0 = 1e4 / np.mean(phi ** 2, axis=0)                    # documented "auto" prior
+    ref = _weighted_ls_reference(y, u, 0.98, p0, np.sum(p0) / 0.98)
+    n = y.size - 2
+    assert (s["input"], s["output"], s["detrend"]) == ("u", "x", "mean")
+    assert s["orders"] == {"na": 2, "nb": 2, "nk": 1} and s["names"] == ["a1", "a2", "b1", "b2"]
+    assert s["units"] == {"output": "m", "input": "V"}
+    assert s["forgetting"] == 0.98 and s["sample_time"] == 0.01
+    assert s["estimates"] == n and s["start_index"] == 2
+    np.testing.assert_allclose(s["p0"], p0, rtol=1e-12)
+    assert s["p_max"] == pytest.approx(np.sum(p0) / 0.98, rel=1e-12)   # trace P0 / lambda
+    # the bound acts where trace P is near trace P0 (the first samples)
+    assert 0.0 < ref["bound_fraction"] < 0.1
+    assert s["bound_active_fraction"] == pytest.approx(ref["bound_fraction"], rel=1e-12)
+    np.testing.assert_allclose(s["a"] + s["b"], ref["theta"], rtol=1e-7)
+    np.testing.assert_allclose([s["final"][k] for k in s["names"]], ref["theta"], rtol=1e-7)
+    std = np.sqrt(np.diag(ref["cov"]))
+    np.testing.assert_allclose(s["std_a"] + s["std_b"], std, rtol=1e-6)
+    np.testing.assert_allclose([s["final_std"][k] for k in s["names"]], std, rtol=1e-6)
+    assert s["noise_variance"] == pytest.approx(ref["s2"], rel=1e-6)
+    burn = max(10 * 4, n // 10)                     # documented default burn-in
+    assert s["prediction_mse_burn_in"] == burn
+    mse = float(np.mean(ref["errors"][burn:] ** 2))
+    assert s["prediction_mse"] == pytest.approx(mse, rel=1e-6)
+    assert s["prediction_rmse"] == pytest.approx(np.sqrt(mse), rel=1e-6)
+    assert s["forgetting_choice"] is None
+    assert s["files"] == {"estimates": str(out / "estimates.csv"),
+                          "report": str(out / "report.md"), "summary": str(out / "summary.json")}
+    assert s["recording"] == str(rec_path) and s["method"] in ("compiled", "casadi", "numpy")
+
+
+def test_cli_forgetting_choice_values(tmp_path, capsys):
+    """--forgetting auto: each candidate's mean squared a priori error after the
+    burn-in from the batch weighted least squares above (1e-6 relative, as in
+    test_cli_summary_every_value), rmse = sqrt(mse), the burn-in by its documented
+    default, the choice = smallest mse (ties to the larger lambda)."""
+    from workbench.__main__ import main
+    from workbench.recording import load_recording
+    rec_path = tmp_path / "rec.csv"
+    _write_recording(rec_path, n=300)
+    assert main(["identify", "rls", str(rec_path), "--orders", "2", "2", "1",
+                 "--forgetting", "auto", "--out", str(tmp_path / "o"), "--no-plot",
+                 "--json"]) == 0
+    ch = json.loads(capsys.readouterr().out)["forgetting_choice"]
+    rec = load_recording(rec_path)
+    y, u = rec["x"], rec["u"]
+    phi = np.array([[-y[k - 1], -y[k - 2], u[k - 1], u[k - 2]] for k in range(2, y.size)])
+    p0 = 1e4 / np.mean(phi ** 2, axis=0)
+    n = y.size - 2
+    burn = max(10 * 4, n // 10)
+    assert ch["burn_in"] == burn
+    want = {}
+    for row in ch["table"]:
+        lam = row["forgetting"]
+        e = _weighted_ls_reference(y, u, lam, p0, np.sum(p0) / lam)["errors"][burn:]
+        want[lam] = float(np.mean(e ** 2))
+        assert row["mse"] == pytest.approx(want[lam], rel=1e-6), lam
+        assert row["rmse"] == pytest.approx(np.sqrt(want[lam]), rel=1e-6), lam
+    assert ch["forgetting"] == min(want, key=lambda lam: (want[lam], -lam))
