@@ -405,6 +405,10 @@ def test_pdf_long_words_are_wrapped_not_clipped(tmp_path):
     x_min = [b[0] for b in boxes]
     margin = 18 / 25.4 * 72
     assert x_max and max(x_max) <= 595.3 - margin + 0.5 and min(x_min) >= margin - 0.5
+    # the measure itself is right: the right-aligned page footer ends on the margin
+    # (A4 = 595.28 pt wide), to 0.5 pt (measured 0.02 pt)
+    footer = [b for b in boxes if b[2].startswith("page 1 of")]
+    assert footer and abs(footer[0][1] - (595.28 - margin)) < 0.5
 
 
 def test_pdf_numbers_never_wrap_in_wide_tables(tmp_path):
