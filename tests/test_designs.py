@@ -40,6 +40,9 @@ def test_situm_design_writes_both_reports(situm_report):
     assert html.count("data:image/png;base64,") >= 5
     summary = json.loads((out / "summary.json").read_text())
     assert rc == (0 if summary["design_passed"] else 1)
+    # the quick run's verdict (PD passes the validation on the nonlinear plant, the
+    # paper-000 limits are reproduced, the sampled loop is stable): a pass
+    assert summary["design_passed"] is True and rc == 0
 
 
 def test_situm_design_reproduces_paper_000(situm_report):
