@@ -18,7 +18,9 @@ Usage::
     python designs/diagnose_concealed.py --cases 10 --seed 7 --out reports/x
 
 Writes ``reports/diagnose_concealed/report.html`` and ``report.pdf``, ``summary.json``
-and ``cases/NN/{plant.toml, recording.csv, diagnosis/...}``.
+and ``cases/NN/{plant.toml, recording.csv, diagnosis/...}``. The verdict (quick mode
+too) is PASS when every case is named correctly and every checked value is within 30 %;
+the exit code is 0 then, else 1.
 """
 
 from __future__ import annotations
@@ -209,15 +211,17 @@ def main(argv=None) -> int:
               f"{r.get('relative_errors', '')}", flush=True)
     wall = time.perf_counter() - t0
     doc = build_report(rows, args.quick, wall)
+    passed = doc.status.outcome == "PASS"
     html, pdf = rp.write(doc, out)
     atomic_write_text(out / "summary.json", json.dumps(
         {"cases": [{k: v for k, v in r.items() if k != "result"} | {"result": r.get("result")}
                    for r in rows],
          "correct": sum(bool(r.get("correct")) for r in rows), "total": len(rows),
-         "wall_s": wall}, indent=1, default=float) + "\n")
+         "passed": passed, "quick": bool(args.quick), "wall_s": wall},
+        indent=1, default=float) + "\n")
     print(f"{sum(bool(r.get('correct')) for r in rows)}/{len(rows)} named correctly; "
-          f"report: {html}")
-    return 0
+          f"verdict {doc.status.outcome}; report: {html}")
+    return 0 if passed else 1
 
 
 if __name__ == "__main__":

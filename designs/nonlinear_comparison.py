@@ -27,6 +27,11 @@ Writes ``reports/nonlinear_comparison/report.html`` and ``report.pdf`` (same con
 trajectories as CSV. A design that fails to run still leaves a report saying at which
 step and why.
 
+Quick mode (0.5 s holds, one line segment, 2 draws per set) judges what holds at that
+size: the NMPC passes the validation on both plants and beats the PD's IAE on the full
+plant by ``QUICK_IAE_FACTOR``; the PD and the FL do not settle within 0.5 s holds and
+are not judged.
+
 Usage: python designs/nonlinear_comparison.py [--quick] [--draws N] [--workers N] [--no-jit]
        [--out DIR]
 """
@@ -67,6 +72,12 @@ EFFECTS = fl_position.EFFECTS
 #: Monte Carlo seed and draws per set (full mode; quick mode: 2).
 SEED = 2026
 DRAWS = 20
+#: Quick-mode verdict: the NMPC passes the validation on both plants and its IAE on the
+#: full plant is at most 1 / QUICK_IAE_FACTOR of the PD's. The quick profile's 0.5 s
+#: holds are too short for the PD and the FL to settle, so their validations are not
+#: judged there. Measured on the quick run: PD / NMPC IAE 2.38 on the full plant (2.54
+#: on the nominal); 1.5 leaves a 35 % margin, and an NMPC no better than the PD fails.
+QUICK_IAE_FACTOR = 1.5
 
 
 def main(argv=None) -> int:
@@ -95,6 +106,34 @@ def main(argv=None) -> int:
 def _fmt_rate(res, name: str) -> str:
     lo, hi = res.pass_interval(name)
     return f"{res.pass_rate(name):.0%} ({lo:.0%} .. {hi:.0%})"
+
+
+def _quick_verdict(nmpc_full, nmpc_nominal, iae_ratio: float) -> tuple[bool, "rp.Status"]:
+    """Verdict of a quick run (see :data:`QUICK_IAE_FACTOR`): (passed, status)."""
+    failed = [f"NMPC fails on the {w} plant ({', '.join(c.name for c in v.failed)})"
+              for w, v in (("full", nmpc_full), ("nominal", nmpc_nominal)) if not v.passed]
+    if not iae_ratio >= QUICK_IAE_FACTOR:
+        failed.append(f"PD / NMPC IAE on the full plant {iae_ratio:.2f} < {QUICK_IAE_FACTOR:g}")
+    if failed:
+        return False, rp.Status("FAIL", "quick mode: " + "; ".join(failed))
+    return True, rp.Status("PASS", "quick mode (0.5 s holds, 2 draws; PD and FL not judged): "
+                                   "the NMPC passes on both plants, IAE PD / NMPC on the full "
+                                   f"plant {iae_ratio:.2f} >= {QUICK_IAE_FACTOR:g}")
+
+
+def _full_verdict(v_full, v_nom, fails: list, iae_ratio: float) -> tuple[bool, "rp.Status"]:
+    """Verdict of a full run: PD and NMPC pass on the full plant, the FL on the nominal
+    one, and the NMPC's IAE is below the PD's. Returns (passed, status)."""
+    nmpc_beats = iae_ratio > 1.0
+    design_ok = bool(v_full["PD"].passed and v_full["NMPC"].passed and v_nom["FL"].passed
+                     and nmpc_beats)
+    if design_ok and not fails:
+        return True, rp.Status("PASS", "all three controllers pass on both plants")
+    if design_ok:
+        return True, rp.Status("NOTE", "PD and NMPC pass on the full plant, the NMPC with the "
+                                       "lower IAE; failed: " + "; ".join(fails))
+    return False, rp.Status("FAIL", "failed: " + "; ".join(fails)
+                            + ("" if nmpc_beats else "; NMPC IAE not below the PD's"))
 
 
 def _design(args, out: Path, done: list, t_start: float) -> int:
@@ -288,22 +327,13 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
 
     with rp.step("write report"):
         v_full, v_nom = runs["full"], runs["nominal"]
-        nmpc_beats = figs["full"]["NMPC"]["iae"] < figs["full"]["PD"]["iae"]
-        design_ok = bool(quick or (v_full["PD"].passed and v_full["NMPC"].passed
-                                   and v_nom["FL"].passed and nmpc_beats))
+        iae_ratio = figs["full"]["PD"]["iae"] / figs["full"]["NMPC"]["iae"]
         fails = [f"{n} on the {w} plant ({', '.join(c.name for c in runs[w][n].failed)})"
                  for w in ("nominal", "full") for n in ctrls if not runs[w][n].passed]
         if quick:
-            status = rp.Status("NOTE", "quick mode (short holds, 2 draws): the chain ran; "
-                                       "verdicts not meaningful")
-        elif design_ok and not fails:
-            status = rp.Status("PASS", "all three controllers pass on both plants")
-        elif design_ok:
-            status = rp.Status("NOTE", "PD and NMPC pass on the full plant, the NMPC with the "
-                                       "lower IAE; failed: " + "; ".join(fails))
+            design_ok, status = _quick_verdict(v_full["NMPC"], v_nom["NMPC"], iae_ratio)
         else:
-            status = rp.Status("FAIL", "failed: " + "; ".join(fails)
-                               + ("" if nmpc_beats else "; NMPC IAE not below the PD's"))
+            design_ok, status = _full_verdict(v_full, v_nom, fails, iae_ratio)
         kv = [("verdict", status.outcome)]
         for n in ctrls:
             kv.append((f"{n}: IAE full / nominal",
@@ -330,8 +360,8 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "validations": {w: {n: v.to_dict() for n, v in vs.items()}
                                    for w, vs in runs.items()},
                    "robustness": {k: r.to_dict() for k, r in mc.items()},
-                   "iae_ratio_pd_over_nmpc_full": (figs["full"]["PD"]["iae"]
-                                                   / figs["full"]["NMPC"]["iae"]),
+                   "quick_iae_factor": QUICK_IAE_FACTOR if quick else None,
+                   "iae_ratio_pd_over_nmpc_full": iae_ratio,
                    "iae_ratio_pd_over_fl_full": (figs["full"]["PD"]["iae"]
                                                  / figs["full"]["FL"]["iae"])}
         atomic_write_text(out / "summary.json",

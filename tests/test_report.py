@@ -6,8 +6,10 @@ matplotlib figures, a 60-row table that must split across PDF pages, provenance.
 Its curves are synthetic (a damped second-order step), since only rendering is
 tested here.
 
-PDF text is checked with ``pdftotext`` (poppler) when it is on PATH; those tests
-are skipped otherwise.
+PDF text and the position of every line of text are read back with ``pypdf`` (the
+``test`` extra of pyproject.toml), so these checks always run; a line's right edge is
+its start plus its width measured by reportlab from the embedded font's own TrueType
+file (matplotlib's DejaVu, the fonts the report embeds), not by the code under test.
 """
 
 from __future__ import annotations
@@ -17,8 +19,6 @@ import html as html_lib
 import io
 import os
 import re
-import shutil
-import subprocess
 from pathlib import Path
 
 import matplotlib
@@ -27,13 +27,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from pypdf import PdfReader  # noqa: E402
 
 from workbench import report as rp  # noqa: E402
 from workbench.report import pdf as rp_pdf  # noqa: E402
 from workbench.report.provenance import PACKAGES  # noqa: E402
-
-PDFTOTEXT = shutil.which("pdftotext")
-needs_pdftotext = pytest.mark.skipif(PDFTOTEXT is None, reason="pdftotext (poppler) not on PATH")
 
 REPO = Path(__file__).resolve().parents[1]
 PLANT = REPO / "designs" / "plants" / "situm_rodless.toml"
@@ -161,9 +159,45 @@ def written(sample, tmp_path_factory):
 
 
 def pdf_text(path: Path) -> str:
-    out = subprocess.run([PDFTOTEXT, "-enc", "UTF-8", str(path), "-"], capture_output=True,
-                         check=True, timeout=60)
-    return out.stdout.decode("utf-8")
+    """Text of every page, pages separated by form feeds (as pdftotext writes them)."""
+    return "\f".join(page.extract_text() for page in PdfReader(path).pages)
+
+
+def _string_width(text: str, base_font: str, size: float) -> float:
+    """Width in pt of ``text`` in the PDF font ``base_font`` (subset prefix allowed).
+
+    Measured by reportlab from the TrueType file of that name in matplotlib's font
+    folder (DejaVu, what the report embeds), or from the AFM metrics of a PDF core font.
+    """
+    from reportlab.pdfbase import pdfmetrics
+    from reportlab.pdfbase.ttfonts import TTFont
+    name = base_font.lstrip("/").split("+")[-1]
+    if name not in pdfmetrics.getRegisteredFontNames() and name not in pdfmetrics.standardFonts:
+        ttf = Path(matplotlib.get_data_path()) / "fonts" / "ttf" / f"{name}.ttf"
+        pdfmetrics.registerFont(TTFont(name, str(ttf)))
+    return pdfmetrics.stringWidth(text, name, size)
+
+
+def pdf_text_boxes(path: Path) -> list[tuple[float, float, str]]:
+    """(x_min, x_max, text) in pt of every line of text drawn, all pages.
+
+    pypdf reports each line with the matrices in force where it starts; the right
+    edge adds the line's width at its font size (no character or word spacing: the
+    report sets none in tables).
+    """
+    boxes = []
+
+    def visit(text, cm, tm, font, size):
+        line = text.rstrip("\n")
+        if not line.strip() or font is None:
+            return
+        scale = cm[0] * tm[0]
+        x0 = cm[0] * tm[4] + cm[2] * tm[5] + cm[4]
+        boxes.append((x0, x0 + scale * _string_width(line, font["/BaseFont"], size), line))
+
+    for page in PdfReader(path).pages:
+        page.extract_text(visitor_text=visit)
+    return boxes
 
 
 def pdf_pages(data: bytes) -> int:
@@ -308,12 +342,11 @@ def test_escaping_of_markup_in_text(tmp_path):
     assert "<script>" not in html and "<b>not bold</b>" not in html and "<i>col" not in html
     assert "&lt;script&gt;" in html
     assert "<title>a &lt; b &amp; c</title>" in html
-    if PDFTOTEXT:
-        text = pdf_text(pdf_path)
-        assert "<script>alert('x')</script> & <b>not bold</b>" in norm(text)
-        assert "<em>cap</em>" in text
-        assert norm(text).count("1 <h1>") == 2  # heading and contents line
-        assert "raise ValueError('<x>')" in text
+    text = pdf_text(pdf_path)
+    assert "<script>alert('x')</script> & <b>not bold</b>" in norm(text)
+    assert "<em>cap</em>" in text
+    assert norm(text).count("1 <h1>") == 2  # heading and contents line
+    assert "raise ValueError('<x>')" in text
 
 
 # --------------------------------------------------------------------------- pdf
@@ -327,7 +360,6 @@ def test_pdf_is_a_pdf_with_sensible_page_count(written):
     assert 4 <= pdf_pages(data) <= 10
 
 
-@needs_pdftotext
 def test_pdf_has_same_content(sample, written):
     text = pdf_text(written[2])
     flat = norm(text)
@@ -347,7 +379,6 @@ def test_pdf_has_same_content(sample, written):
                 assert all(w in words for w in cell.split()), cell
 
 
-@needs_pdftotext
 def test_long_table_repeats_header_on_every_page(written):
     pages = pdf_text(written[2]).split("\f")
     with_header = [i for i, p in enumerate(pages) if "K0 sampled" in p]
@@ -359,27 +390,27 @@ def test_long_table_repeats_header_on_every_page(written):
     assert "0.59" in pages[with_header[-1]]
 
 
-@needs_pdftotext
 def test_pdf_long_words_are_wrapped_not_clipped(tmp_path):
     sha = "f1ca4ae0d19c3bf7e5cd8fc3b2a1e5b50dcc145d8c77233700c8fb66d7526496" * 2
     path = "designs/plants/" + "very_long_name_" * 8
     doc = rp.Report("wrap", sections=[rp.Section("s", [
         rp.Table(["file", "hash", "x"], [[path, sha, 1.0]])])])
     _, pdf_path = rp.write(doc, tmp_path)
-    raw = subprocess.run([PDFTOTEXT, "-raw", str(pdf_path), "-"], capture_output=True,
-                         check=True, timeout=60).stdout.decode()
-    joined = re.sub(r"\s+", "", raw)
+    joined = re.sub(r"\s+", "", pdf_text(pdf_path))
     assert sha in joined and path in joined  # every character is drawn, in order
     # ... and inside the text frame (18 mm margins on A4 = 595 x 842 pt).
-    bbox = subprocess.run([PDFTOTEXT, "-bbox", str(pdf_path), "-"], capture_output=True,
-                          check=True, timeout=60).stdout.decode()
-    x_max = [float(v) for v in re.findall(r'xMax="([\d.]+)"', bbox)]
-    x_min = [float(v) for v in re.findall(r'xMin="([\d.]+)"', bbox)]
+    boxes = pdf_text_boxes(pdf_path)
+    assert any(sha[:20] in t for _, _, t in boxes)      # the boxes include the table's lines
+    x_max = [b[1] for b in boxes]
+    x_min = [b[0] for b in boxes]
     margin = 18 / 25.4 * 72
     assert x_max and max(x_max) <= 595.3 - margin + 0.5 and min(x_min) >= margin - 0.5
+    # the measure itself is right: the right-aligned page footer ends on the margin
+    # (A4 = 595.28 pt wide), to 0.5 pt (measured 0.02 pt)
+    footer = [b for b in boxes if b[2].startswith("page 1 of")]
+    assert footer and abs(footer[0][1] - (595.28 - margin)) < 0.5
 
 
-@needs_pdftotext
 def test_pdf_numbers_never_wrap_in_wide_tables(tmp_path):
     # 12 columns with long headings do not fit A4 at the normal size: the font
     # shrinks and headings may wrap, but every number stays on one line.
@@ -387,9 +418,7 @@ def test_pdf_numbers_never_wrap_in_wide_tables(tmp_path):
     row = [1.23456789 * 10.0 ** (i - 5) for i in range(11)] + ["/very/long/path" * 6]
     table = rp.Table(cols, [row] * 3, units=["m"] * 12)
     _, pdf_path = rp.write(rp.Report("wide", sections=[rp.Section("s", [table])]), tmp_path)
-    raw = subprocess.run([PDFTOTEXT, "-raw", str(pdf_path), "-"], capture_output=True,
-                         check=True, timeout=60).stdout.decode()
-    tokens = set(raw.split())
+    tokens = set(pdf_text(pdf_path).split())
     for cell in table.formatted_rows()[0][:11]:
         assert cell in tokens, cell
 
@@ -469,8 +498,7 @@ def test_write_failure_says_what_failed(tmp_path):
     assert "_crash" in html  # the traceback names the failing function
     assert "2 Plant" in norm(re.sub(r"<[^>]+>", " ", html))
     assert pdf_path.read_bytes().startswith(b"%PDF")
-    if PDFTOTEXT:
-        assert msg in norm(pdf_text(pdf_path))
+    assert msg in norm(pdf_text(pdf_path))
 
 
 def test_write_failure_survives_unrenderable_partial_sections(tmp_path, monkeypatch):

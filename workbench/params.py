@@ -8,8 +8,8 @@ all driven by that table, so a key cannot be known to one and unknown to another
 Examples
 --------
 >>> from workbench.params import PlantParams
->>> params = PlantParams.from_toml("designs/plants/situm_rodless.toml")  # doctest: +SKIP
->>> params.effects                                                        # doctest: +SKIP
+>>> params = PlantParams.from_toml("designs/plants/situm_rodless.toml")
+>>> params.effects
 ()
 
 Valve law (extra optional keys; formats.md defines none, so files without them load
@@ -426,7 +426,10 @@ class PlantParams:
 
         Examples
         --------
-        >>> p2 = params.replace(**{"load.mass": 2.0})           # doctest: +SKIP
+        >>> params = PlantParams.from_toml("designs/plants/situm_rodless.toml")
+        >>> p2 = params.replace(**{"load.mass": 2.0})
+        >>> p2["load.mass"], params["load.mass"]      # kg; the original is unchanged
+        (2.0, 0.91)
         """
         new = dict(self.values)
         for path, val in changes.items():

@@ -18,10 +18,12 @@ adjust them (see :mod:`workbench.params` for the keys).
 Examples
 --------
 >>> from workbench import Plant
->>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")   # doctest: +SKIP
->>> plant.state_names                                              # doctest: +SKIP
+>>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+>>> plant.state_names
 ('x', 'v', 'p_a', 'p_b')
->>> xdot = plant.f(plant.initial_state(0.25), 5.0, plant.p0)       # doctest: +SKIP
+>>> xdot = plant.f(plant.initial_state(0.25), 5.0, plant.p0)
+>>> bool(abs(xdot.full()).max() < 1e-9)         # at rest at the valve centre: equilibrium
+True
 """
 
 from __future__ import annotations

@@ -175,7 +175,9 @@ class Recording:
 
         Examples
         --------
-        >>> rec = Recording.load("tests/data/recordings/step_small.csv")  # doctest: +SKIP
+        >>> rec = Recording.load("tests/data/recordings/step_small.csv")
+        >>> rec.columns, len(rec), rec.sample_time
+        (('t', 'u', 'x', 'p_a', 'p_b', 'r'), 50, 0.01)
         """
         path = Path(path)
         kind = _SUFFIXES.get(path.suffix.lower())

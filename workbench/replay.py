@@ -26,11 +26,14 @@ estimator's before/after fits and integration check
 >>> from workbench import Plant
 >>> from workbench.recording import Recording
 >>> from workbench import replay as rp
->>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")       # doctest: +SKIP
->>> rec = Recording.load("run.csv")                                  # doctest: +SKIP
->>> result = rp.replay(plant, rec)                                   # doctest: +SKIP
->>> result.mode, result.recording["x"][:3]                           # doctest: +SKIP
->>> run = rp.run(plant, rec, rp.OpenLoop(steps="run"))               # doctest: +SKIP
+>>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")
+>>> rec = Recording.load("tests/data/recordings/step_small.csv")
+>>> result = rp.replay(plant, rec)
+>>> result.mode                                  # the recording has r, the plant a [controller]
+'closed_loop'
+>>> run = rp.run(plant, rec, rp.OpenLoop(steps="run"))
+>>> len(run["x"]) == len(rec)                    # one simulated sample per recorded one
+True
 """
 
 from __future__ import annotations

@@ -12,12 +12,15 @@ by a jump). Each segment gets its metrics; each check judges the worst segment.
 
 Examples
 --------
->>> from workbench import Plant, controllers, validate                      # doctest: +SKIP
->>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")            # doctest: +SKIP
->>> v = validate.validate(plant, controllers.from_plant(plant))             # doctest: +SKIP
->>> v.passed, [c.name for c in v.failed]                                   # doctest: +SKIP
+>>> from workbench import Plant, controllers, validate
+>>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+>>> v = validate.validate(plant, controllers.from_plant(plant))
+>>> v.passed, [c.name for c in v.failed]
 (False, ['overshoot'])
->>> for row in v.table(): print(row)                                        # doctest: +SKIP
+>>> for row in v.table()[:3]: print(row)
+('simulation', '22.75', '<= 22.75', 's', 'pass')
+('overshoot', '12.019', '<= 10', '%', 'FAIL')
+('settling time', '0.69288', '<= 1.5', 's', 'pass')
 """
 
 from __future__ import annotations
@@ -534,8 +537,11 @@ def validate(plant, controller=None, spec: Specification | None = None,
 
     Examples
     --------
-    >>> v = validate(plant, controllers.from_plant(plant))   # doctest: +SKIP
-    >>> print(v.summary())                                    # doctest: +SKIP
+    >>> from workbench import Plant, controllers
+    >>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+    >>> v = validate(plant, controllers.from_plant(plant))
+    >>> print(v.summary().splitlines()[0])
+    situm-rodless-15mm: P (kp = 10): FAILED
     """
     if controller is None:
         from .controllers import from_plant

@@ -19,6 +19,10 @@ compilers...).
 >>> from workbench import bench
 >>> bench.NAMES
 ('simulate', 'sweep', 'rls', 'greybox', 'mpc', 'diagnose')
+
+Skipped here: a benchmark times things (seconds even in quick mode) and its numbers
+depend on the machine:
+
 >>> result = bench.run("sweep", quick=True)          # doctest: +SKIP
 """
 

@@ -46,9 +46,9 @@ Examples
 --------
 >>> from workbench import Plant, simulate
 >>> from workbench.controllers.feedback_linearizing import feedback_linearizing
->>> plant = Plant.from_toml("tests/data/plants/input_affine.toml")          # doctest: +SKIP
->>> fl = feedback_linearizing(plant, bandwidth=20.0)                        # doctest: +SKIP
->>> run = simulate.closed_loop(plant, fl, simulate.steps([0.25, 0.35], 1.0))  # doctest: +SKIP
+>>> plant = Plant.from_toml("tests/data/plants/input_affine.toml")
+>>> fl = feedback_linearizing(plant, bandwidth=20.0)
+>>> run = simulate.closed_loop(plant, fl, simulate.steps([0.25, 0.35], 1.0))
 """
 
 from __future__ import annotations

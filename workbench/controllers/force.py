@@ -33,11 +33,12 @@ Examples
 --------
 >>> from workbench import Plant
 >>> from workbench.controllers.force import DriveModel, pressure_plan
->>> plant = Plant.from_toml("tests/data/plants/input_affine.toml")      # doctest: +SKIP
->>> model = DriveModel.from_plant(plant)                                # doctest: +SKIP
->>> t = np.linspace(0, 2, 2001)                                         # doctest: +SKIP
->>> plan = pressure_plan(model, t, 100 * np.sin(np.pi * t) ** 2, x=0.25)   # doctest: +SKIP
->>> plan.air_mass                                                       # doctest: +SKIP
+>>> plant = Plant.from_toml("tests/data/plants/input_affine.toml")
+>>> model = DriveModel.from_plant(plant)
+>>> t = np.linspace(0, 2, 2001)
+>>> plan = pressure_plan(model, t, 100 * np.sin(np.pi * t) ** 2, x=0.25)
+>>> round(plan.air_mass * 1e3, 2)              # g of air drawn from the supply over the 2 s
+0.52
 """
 
 from __future__ import annotations

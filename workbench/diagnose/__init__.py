@@ -21,6 +21,10 @@ The method is split into parts (one concept per module):
 
 Examples
 --------
+Skipped here: a diagnosis takes 5-10 s (tests/test_diagnose*.py run it on synthetic
+recordings, e.g. from :func:`.synth.record` written with ``case.write_nominal`` and
+``rec.to_csv``):
+
 >>> from workbench.diagnose import diagnose
 >>> d = diagnose("plant.toml", "recording.csv")   # doctest: +SKIP
 >>> print(d.summary())                            # doctest: +SKIP

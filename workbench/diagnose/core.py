@@ -31,6 +31,8 @@ Method
 
 Examples
 --------
+Skipped here: a diagnosis takes 5-10 s (tests/test_diagnose*.py run it):
+
 >>> from workbench.diagnose import diagnose
 >>> d = diagnose("plant.toml", "recording.csv")          # doctest: +SKIP
 >>> d.findings[0].effect, d.fit_before, d.fit_after       # doctest: +SKIP

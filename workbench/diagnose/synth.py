@@ -13,8 +13,12 @@ position the logger writes, as on a real rig.
 Examples
 --------
 >>> from workbench.diagnose import synth
->>> case = synth.concealed_case("valve_offset", seed=3)          # doctest: +SKIP
->>> rec = synth.record(case, seed=3)                              # doctest: +SKIP
+>>> case = synth.concealed_case("valve_offset", seed=3)
+>>> case.effect, round(case.values["valve.null_offset"], 3)      # V, drawn from its range
+('valve_offset', -0.164)
+>>> rec = synth.record(case, seed=3, duration=2.0)               # default 24 s
+>>> rec.columns, len(rec), rec.sample_time                       # 1 kHz logger
+(('t', 'u', 'x', 'p_a', 'p_b', 'r'), 2001, 0.001)
 """
 
 from __future__ import annotations

@@ -59,13 +59,18 @@ extrapolated along the current reference rate when that rate is below
 
 Examples
 --------
->>> from workbench import Plant, simulate, validate
+>>> from workbench import Plant, simulate
 >>> from workbench.controllers.mpc import NMPC
->>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")            # doctest: +SKIP
->>> nmpc = NMPC.for_plant(plant, horizon=20)                            # doctest: +SKIP
->>> run = simulate.closed_loop(plant, nmpc, validate.validation_profile(plant))  # doctest: +SKIP
->>> sol = nmpc.solve({"x": 0.25, "v": 0.0, "p_a": 4.5e5, "p_b": 4.5e5}, r=0.3)  # doctest: +SKIP
->>> sol.commands[0], sol.states[-1]                # V; x, v, p_a, p_b at the horizon's end
+>>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")
+>>> nmpc = NMPC.for_plant(plant, horizon=20, jit=False)   # jit=True: compiled C, faster
+>>> sol = nmpc.solve({"x": 0.25, "v": 0.0, "p_a": 4.5e5, "p_b": 4.5e5}, r=0.3)
+>>> round(float(sol.commands[0]), 1), round(float(sol.states[-1][0]), 3)  # V; m at the end
+(7.8, 0.3)
+>>> run = simulate.closed_loop(plant, nmpc, simulate.steps([0.3, 0.2], hold=1.0), x0=0.25)
+>>> round(float(run["x"][-1]), 4)               # m: on the last step after 1 s
+0.2
+
+``validate.validate(plant, nmpc)`` runs the 23 s validation profile the same way.
 
 Layout
 ------

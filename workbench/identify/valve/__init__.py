@@ -27,14 +27,14 @@ Examples
 --------
 >>> from workbench import Plant, PlantParams
 >>> from workbench.identify import valve as vf
->>> table = vf.load_valve_table("tests/data/valve/rig25_table.csv")      # doctest: +SKIP
->>> fit1 = vf.fit_polynomial(table, 5, 10)                               # doctest: +SKIP
->>> fit2 = vf.fit_affine(table)                                          # doctest: +SKIP
->>> round(fit1.quality.r, 4), round(fit2.quality.max_error_g_s, 2)      # doctest: +SKIP
+>>> table = vf.load_valve_table("tests/data/valve/rig25_table.csv")
+>>> fit1 = vf.fit_polynomial(table, 5, 10)
+>>> fit2 = vf.fit_affine(table)
+>>> round(fit1.quality.r, 4), round(fit2.quality.max_error_g_s, 2)
 (0.9999, 1.47)
->>> base = PlantParams.from_toml("designs/plants/rig25_mpye.toml")     # doctest: +SKIP
->>> plant = Plant(base.replace(**fit2.plant_values()))                   # doctest: +SKIP
->>> gains = vf.pressure_gain(fit2.flow, [4.9, 5.0, 5.1], table.pressure_range)  # doctest: +SKIP
+>>> base = PlantParams.from_toml("designs/plants/rig25_mpye.toml")
+>>> plant = Plant(base.replace(**fit2.plant_values()))
+>>> gains = vf.pressure_gain(fit2.flow, [4.9, 5.0, 5.1], table.pressure_range)
 
 Modules: :mod:`.table` (the table format), :mod:`.generator` (tables from a plant's
 valve), :mod:`.polynomial` (approximation I), :mod:`.affine` (approximation II),
