@@ -383,12 +383,37 @@ def stale(mutations: Sequence[Mutation], root: Path = REPO) -> list[str]:
     return problems
 
 
-def present_tests(m: Mutation, root: Path = REPO) -> tuple[list[str], list[str]]:
-    """(the test ids of ``m`` whose file exists, the files that do not exist yet)."""
+def present_tests(m: Mutation, root: Path = REPO, collected: set[str] | None = None
+                  ) -> tuple[list[str], list[str]]:
+    """(the test ids of ``m`` to run, those skipped because they do not exist (yet)).
+
+    A file that does not exist is skipped. With ``collected`` (the node ids pytest
+    collects, see :func:`collect_nodes`), a node id ``file::test[...]`` it does not
+    know is skipped too; when none of a file's node ids is left (renamed), the whole
+    file runs instead.
+    """
     have, missing = [], []
     for t in m.tests:
-        (have if (root / t.split("::", 1)[0]).is_file() else missing).append(t)
+        f = t.split("::", 1)[0]
+        ok = (root / f).is_file() and ("::" not in t or collected is None or t in collected)
+        (have if ok else missing).append(t)
+    for f in dict.fromkeys(t.split("::", 1)[0] for t in missing if "::" in t):
+        if (root / f).is_file() and not any(h.split("::", 1)[0] == f for h in have):
+            have.append(f)
     return have, missing
+
+
+def collect_nodes(mutations: Sequence[Mutation], workdir: Path, python: str) -> set[str]:
+    """Node ids pytest collects (unmutated) in the files that mutations name by node id."""
+    files = sorted({t.split("::", 1)[0] for m in mutations for t in m.tests
+                    if "::" in t and (workdir / t.split("::", 1)[0]).is_file()})
+    if not files:
+        return set()
+    env = dict(os.environ, PYTHONPATH=str(workdir))
+    proc = subprocess.run([python, "-m", "pytest", "--collect-only", "-q", "-p",
+                           "no:cacheprovider", "-o", "addopts=", *files], cwd=workdir,
+                          env=env, capture_output=True, text=True, timeout=600)
+    return {ln.strip() for ln in proc.stdout.splitlines() if "::" in ln}
 
 
 # ------------------------------------------------------------------ running
@@ -429,9 +454,10 @@ def _summary_line(output: str) -> str:
     return (failed[0] + " | " if failed else "") + tail
 
 
-def run_one(m: Mutation, workdir: Path, timeout: float, python: str) -> Outcome:
+def run_one(m: Mutation, workdir: Path, timeout: float, python: str,
+            collected: set[str] | None = None) -> Outcome:
     """Plant ``m`` in the copy at ``workdir``, run its tests there, restore the file."""
-    have, missing = present_tests(m, workdir)
+    have, missing = present_tests(m, workdir, collected)
     if not have:
         return Outcome(m.name, m.group, "error", 0.0,
                        "none of its test files exists", (), tuple(missing))
@@ -472,12 +498,12 @@ def run_one(m: Mutation, workdir: Path, timeout: float, python: str) -> Outcome:
                    tuple(have), tuple(missing))
 
 
-def run_baseline(tests: Sequence[str], workdir: Path, timeout: float, python: str) -> Outcome:
+def run_baseline(tests: Sequence[str], workdir: Path, timeout: float, python: str,
+                 collected: set[str] | None = None) -> Outcome:
     """The targeted tests on the unmutated copy: they must pass, or a kill means nothing."""
     m = Mutation("(baseline: no mutation)", "-", "pyproject.toml", "[tool.pytest",
                  "[tool.pytest", "unmutated", tuple(tests))
-    out = run_one(m, workdir, timeout, python)
-    return out
+    return run_one(m, workdir, timeout, python, collected)
 
 
 def run_all(mutations: Sequence[Mutation], jobs: int, timeout: float, python: str,
@@ -493,11 +519,17 @@ def run_all(mutations: Sequence[Mutation], jobs: int, timeout: float, python: st
             d.mkdir()
             _copy_tree(d)
             slots.append(d)
+        collected = collect_nodes(mutations, slots[0], python)
+        gone = sorted({t for m in mutations for t in present_tests(m, slots[0], collected)[1]})
+        if gone:
+            progress("skipped, not found (yet): " + ", ".join(gone))
         if baseline:
-            union = sorted({t for m in mutations for t in present_tests(m, slots[0])[0]})
+            union = sorted({t for m in mutations
+                            for t in present_tests(m, slots[0], collected)[0]})
             progress(f"baseline: {len(union)} test files, unmutated ...")
-            base = run_baseline(union, slots[0], 4 * timeout, python)
-            progress(f"baseline: {base.status} ({base.seconds:.0f} s) {base.detail}")
+            base = run_baseline(union, slots[0], 4 * timeout, python, collected)
+            verdict = "passed" if base.status == "survived" else f"FAILED ({base.status})"
+            progress(f"baseline: {verdict} ({base.seconds:.0f} s) {base.detail}")
         free = list(slots)
         lock = threading.Lock()
         done = [0]
@@ -506,7 +538,7 @@ def run_all(mutations: Sequence[Mutation], jobs: int, timeout: float, python: st
             with lock:
                 d = free.pop()
             try:
-                o = run_one(m, d, timeout, python)
+                o = run_one(m, d, timeout, python, collected)
             finally:
                 with lock:
                     free.append(d)
@@ -544,7 +576,7 @@ def table(outcomes: Sequence[Outcome]) -> str:
     missing = sorted({t for o in outcomes for t in o.missing})
     if missing:
         lines.append("")
-        lines.append("test files named by mutations but missing (skipped): " + ", ".join(missing))
+        lines.append("tests named by mutations but missing (skipped): " + ", ".join(missing))
     lines.append("")
     sc = scores(outcomes)
     for g in [*GROUPS, "all"]:
