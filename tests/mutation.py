@@ -1,0 +1,676 @@
+"""Mutation testing by hand: plant plausible bugs one at a time, see which the tests catch.
+
+Each :class:`Mutation` names a file, an exact piece of its text (which must occur
+exactly once), its replacement, a one-line description and the test files (or
+pytest node ids) that ought to catch it. For every mutation the script copies the
+repository's ``workbench/``, ``tests/``, ``designs/`` and ``pyproject.toml`` into a
+temporary directory (never the working tree), plants the bug there, runs the
+targeted tests with ``PYTHONPATH`` set to the copy (``pytest -x``, with a time
+limit), restores the file and records the outcome:
+
+* ``killed``: a test failed (or could not even be collected);
+* ``survived``: the targeted tests all passed with the bug in place;
+* ``timeout``: the tests ran past ``--timeout`` seconds;
+* ``error``: pytest could not run (no tests, usage error, internal error).
+
+It prints a table and the score (killed / total) per module group: ``physics``
+(workbench/physics, plant.py wiring), ``diagnose`` (the ranking and its evidence),
+``identify`` (ARX, RLS, grey-box covariance, valve fits) and ``control`` (the valve
+inversion and the gain limits of the issue's list).
+
+Usage (from the repository root)::
+
+    python tests/mutation.py                      # every mutation, one at a time
+    python tests/mutation.py --modules physics,diagnose --jobs 2
+    python tests/mutation.py --list               # the mutations, nothing run
+    python tests/mutation.py --only supply-leak-reversed,arx-variance-n
+    python tests/mutation.py --json mutation.json # outcomes as JSON too
+
+A test file named by a mutation that does not exist (yet) is skipped, and the
+output says so; a mutation whose every test file is missing is reported as
+``error``. The name has no ``test_`` prefix, so pytest does not collect it;
+``tests/test_mutation_script.py`` checks that the list is not stale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Sequence
+
+REPO = Path(__file__).resolve().parents[1]
+#: What a temporary copy holds (everything the targeted tests read).
+COPIED = ("workbench", "tests", "designs", "pyproject.toml")
+GROUPS = ("physics", "diagnose", "identify", "control")
+#: Seconds one mutant's tests may run before it counts as a timeout.
+DEFAULT_TIMEOUT = 300.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Mutation:
+    """One planted bug: ``original`` (exactly once in ``file``) becomes ``replacement``."""
+
+    name: str
+    group: str
+    file: str
+    original: str
+    replacement: str
+    description: str
+    tests: tuple[str, ...]
+
+
+# ------------------------------------------------------------------ test subsets
+# Each subset is small enough that one mutant runs in seconds. The files of the
+# issue-17 helpers that may not exist yet are named too (skipped while missing).
+PHYS = ("tests/test_effect_laws.py", "tests/test_physics.py", "tests/test_physics_backends.py",
+        "tests/test_plant.py")
+PHYS_PLANT = PHYS + ("tests/test_linearize.py",)
+PHYS_GREY = PHYS + ("tests/test_grey_box.py",)
+#: The whole of test_diagnose.py takes minutes (a full diagnosis per case): a few cases.
+DIAG = ("tests/test_diagnose_rank.py", "tests/test_diagnose_blind.py",
+        "tests/test_diagnose.py::test_concealed_effect_is_diagnosed[none]",
+        "tests/test_diagnose.py::test_concealed_effect_is_diagnosed[leakage]",
+        "tests/test_diagnose.py::test_concealed_effect_is_diagnosed[mass_error]",
+        "tests/test_diagnose.py::test_json_contract_and_files")
+ARX = ("tests/test_arx.py", "tests/test_serialisation.py", "tests/test_signals.py")
+RLS = ("tests/test_rls.py",)
+GREY = ("tests/test_grey_box.py",)
+VALVE = ("tests/test_valve_fit.py",)
+INV = ("tests/test_inversion.py", "tests/test_feedback_linearizing.py")
+LIM = ("tests/test_limits.py", "tests/test_serialisation.py")
+
+
+def _m(name, group, file, original, replacement, description, tests):
+    """A :class:`Mutation` (positional, to keep the list below compact)."""
+    return Mutation(name, group, file, original, replacement, description, tuple(tests))
+
+
+MUTATIONS: tuple[Mutation, ...] = (
+    # ------------------------------------------------------------------ physics
+    _m("supply-leak-reversed", "physics", "workbench/physics/supply.py",
+       "return iso6358_flow(conductance, b, p, p_atm, temperature, temperature)",
+       "return iso6358_flow(conductance, b, p_atm, p, temperature, temperature)",
+       "issue 17: leak to atmosphere reversed (air pumped in from outside)", PHYS_GREY),
+    _m("cross-leak-sign", "physics", "workbench/physics/supply.py",
+       "return conductance * (p_a - p_b)", "return conductance * (p_b - p_a)",
+       "cross-piston leak flows from low to high pressure", PHYS),
+    _m("reservoir-outflow-sign", "physics", "workbench/physics/supply.py",
+       "(q_in - q_out)", "(q_in + q_out)",
+       "reservoir fills with the valve's draw instead of emptying", PHYS),
+    _m("reservoir-regulator-swapped", "physics", "workbench/physics/supply.py",
+       "iso6358_flow(regulator_conductance, b, p_set, p_s,",
+       "iso6358_flow(regulator_conductance, b, p_s, p_set,",
+       "regulator flow with its pressures swapped (flows out of the reservoir)", PHYS),
+    _m("four-edge-exhaust-b-temperature", "physics", "workbench/physics/valve.py",
+       "iso6358_flow(conductance, b, p_b, p_atm, t_b, T_REF)",
+       "iso6358_flow(conductance, b, p_b, p_atm, t_a, T_REF)",
+       "issue 17: exhaust edge of B uses chamber A's temperature", PHYS_GREY),
+    _m("four-edge-a-exhaust-opening", "physics", "workbench/physics/valve.py",
+       "a_to_e = o_minus * iso6358_flow", "a_to_e = o_plus * iso6358_flow",
+       "A->exhaust edge scaled by the S->A opening", PHYS),
+    _m("four-edge-supply-draw", "physics", "workbench/physics/valve.py",
+       "s_to_b - b_to_e, s_to_a + s_to_b", "s_to_b - b_to_e, s_to_a - s_to_b",
+       "supply draw is the difference of the two supply edges", PHYS),
+    _m("spool-damping-factor", "physics", "workbench/physics/valve.py",
+       "w * w * (u - y) - 2.0 * damping * w * y_dot", "w * w * (u - y) - damping * w * y_dot",
+       "spool lag damping term without its factor 2", PHYS),
+    _m("gamma-odd-power", "physics", "workbench/physics/valve.py",
+       "power = power * mag", "power = power * du",
+       "Gamma(du) uses du^k instead of du |du|^(k-1) (not odd)", PHYS + INV),
+    _m("deadband-scale", "physics", "workbench/physics/valve.py",
+       "/ (1.0 - deadband)", "/ (1.0 + deadband)",
+       "opening after the overlap rescaled by 1 + d", PHYS),
+    _m("null-offset-sign", "physics", "workbench/physics/valve.py",
+       "(u - center - offset) / span", "(u - center + offset) / span",
+       "valve null offset applied with the wrong sign", PHYS),
+    _m("affine-psi-swapped", "physics", "workbench/physics/valve.py",
+       "ops.where(gamma >= 0, polyval(psi_in, pn), polyval(psi_out, pn))",
+       "ops.where(gamma >= 0, polyval(psi_out, pn), polyval(psi_in, pn))",
+       "input-affine law: inlet and exhaust psi swapped", PHYS + INV),
+    _m("chamber-b-volume-rate", "physics", "workbench/physics/chamber.py",
+       "area_a * v, -area_b * v)", "area_a * v, area_b * v)",
+       "chamber B volume grows as the piston moves towards it", PHYS),
+    _m("pressure-rate-work-sign", "physics", "workbench/physics/chamber.py",
+       "(r * temperature * q - p * volume_rate)", "(r * temperature * q + p * volume_rate)",
+       "polytropic chamber: compression work with the wrong sign", PHYS),
+    _m("heat-wall-sign", "physics", "workbench/physics/chamber.py",
+       "h * (t_wall - temp))", "h * (temp - t_wall))",
+       "heat flows from the cold wall into the hot gas", PHYS_GREY),
+    _m("energy-outflow-temperature", "physics", "workbench/physics/chamber.py",
+       "(tq_in - temp * q_out)", "(tq_in - t_wall * q_out)",
+       "leaving gas carries the wall temperature instead of the chamber's", PHYS),
+    _m("stribeck-levels-swapped", "physics", "workbench/physics/friction.py",
+       "return coulomb + (static - coulomb) * ops.exp(",
+       "return static + (coulomb - static) * ops.exp(",
+       "Stribeck curve: Coulomb and static levels swapped", PHYS),
+    _m("stick-held-by-coulomb", "physics", "workbench/physics/friction.py",
+       "held = ops.fabs(drive_force) <= static", "held = ops.fabs(drive_force) <= coulomb",
+       "piston breaks away at the Coulomb instead of the static level", PHYS),
+    _m("smooth-viscous-sign", "physics", "workbench/physics/friction.py",
+       "+ viscous * v)", "- viscous * v)",
+       "smooth friction: viscous term pushes along the motion", PHYS),
+    _m("pneumatic-force-atm-sign", "physics", "workbench/physics/piston.py",
+       "- p_atm * (area_a - area_b)", "+ p_atm * (area_a - area_b)",
+       "atmospheric force on the rod side with the wrong sign", PHYS),
+    _m("end-stop-damping-factor", "physics", "workbench/physics/piston.py",
+       "c = 2.0 * damping * mass * w", "c = damping * mass * w",
+       "end-stop damping without its factor 2", PHYS),
+    _m("iso-psi-denominator", "physics", "workbench/physics/gas.py",
+       "smooth_sqrt(1.0 - x, margin) / (1.0 - b)", "smooth_sqrt(1.0 - x, margin) / (1.0 + b)",
+       "ISO 6358 subsonic branch divided by 1 + b", PHYS),
+    _m("iso-temperature-ratio", "physics", "workbench/physics/gas.py",
+       "* ops.sqrt(T_REF / t1)", "* ops.sqrt(t1 / T_REF)",
+       "ISO 6358 forward flow: temperature correction inverted", PHYS),
+    _m("nozzle-k-factor", "physics", "workbench/physics/gas.py",
+       "k = gamma / r * 2.0 / (gamma - 1.0)", "k = gamma / r * 2.0 / (gamma + 1.0)",
+       "nozzle law subsonic factor with gamma + 1", PHYS),
+    _m("speed-of-sound-gamma", "physics", "workbench/physics/gas.py",
+       "return ops.sqrt(gamma * r * temperature)", "return ops.sqrt(r * temperature)",
+       "isothermal instead of adiabatic speed of sound", PHYS),
+    _m("line-laminar-factor", "physics", "workbench/physics/line.py",
+       "lam = 32.0 * mu", "lam = 16.0 * mu",
+       "Hagen-Poiseuille drop with 16 instead of 32", PHYS),
+    _m("line-segment-off-by-one", "physics", "workbench/physics/line.py",
+       "seg = length / n\n", "seg = length / (n + 1)\n",
+       "line segment length off by one segment", PHYS),
+    _m("line-drop-sign", "physics", "workbench/physics/line.py",
+       "(p_nodes[j] - p_next - drop)", "(p_nodes[j] - p_next + drop)",
+       "line friction accelerates the flow", PHYS),
+    _m("plant-leak-b-pressure", "physics", "workbench/plant.py",
+       "leak_b = supply.leak_to_atmosphere(s.p_b,", "leak_b = supply.leak_to_atmosphere(s.p_a,",
+       "plant wiring: chamber B leaks at chamber A's pressure", PHYS_GREY),
+    _m("plant-cross-b-sign", "physics", "workbench/plant.py",
+       "q_b - leak_b + cross, k, T)", "q_b - leak_b - cross, k, T)",
+       "plant wiring: cross leak removed from both chambers", PHYS),
+    _m("plant-heat-leak-b", "physics", "workbench/plant.py",
+       "qb_out + xb_out + leak_b, h, T)", "qb_out + xb_out + leak_a, h, T)",
+       "plant wiring (heat transfer): chamber B loses chamber A's leak", PHYS_GREY),
+    _m("plant-cross-temperature", "physics", "workbench/plant.py",
+       "tq_a = T * qa_in + s.t_b * xa_in", "tq_a = T * qa_in + s.t_a * xa_in",
+       "plant wiring (heat transfer): cross leak into A at A's temperature", PHYS),
+    _m("plant-viscous-sign", "physics", "workbench/plant.py",
+       "return (drive - beta * s.v) / m", "return (drive + beta * s.v) / m",
+       "plant wiring: viscous friction pushes along the motion", PHYS_PLANT),
+    _m("plant-external-force-sign", "physics", "workbench/plant.py",
+       'drive = force - pv["load.external_force"]', 'drive = force + pv["load.external_force"]',
+       "plant wiring: external load force with the wrong sign", PHYS_PLANT),
+    _m("plant-valve-port-temperature", "physics", "workbench/plant.py",
+       'pv["valve.critical_pressure_ratio"], T, port_ta,',
+       'pv["valve.critical_pressure_ratio"], T, port_tb,',
+       "plant wiring: valve sees chamber B's temperature at port A", PHYS_GREY),
+    # ------------------------------------------------------------------ diagnosis
+    _m("dbic-penalty-sign", "diagnose", "workbench/diagnose/explain.py",
+       "- r.k * math.log(n_eff)", "+ r.k * math.log(n_eff)",
+       "issue 17: dBIC rewards instead of penalising fitted values", DIAG),
+    _m("gain-over-j", "diagnose", "workbench/diagnose/explain.py",
+       "gain = (cost0 - r.cost) / cost0 if", "gain = (cost0 - r.cost) / r.cost if",
+       "issue 17: gain computed as (J0 - J) / J", DIAG),
+    _m("dbic-ratio-inverted", "diagnose", "workbench/diagnose/explain.py",
+       "math.log(max(cost0, 1e-300) / max(r.cost, 1e-300))",
+       "math.log(max(r.cost, 1e-300) / max(cost0, 1e-300))",
+       "dBIC log ratio inverted (J / J0)", DIAG),
+    _m("dbic-threshold-inverted", "diagnose", "workbench/diagnose/explain.py",
+       "if dbic < DBIC_MIN:", "if dbic > DBIC_MIN:",
+       "significance: dBIC comparison inverted", DIAG),
+    _m("gain-min-factor", "diagnose", "workbench/diagnose/explain.py",
+       "GAIN_MIN = 0.25", "GAIN_MIN = 0.025",
+       "significance: minimum gain ten times too small", DIAG),
+    _m("gain-per-value", "diagnose", "workbench/diagnose/explain.py",
+       "gain / max(r.k, 1)", "gain * max(r.k, 1)",
+       "gain per fitted value multiplied instead of divided", DIAG),
+    _m("seg-gain-sign", "diagnose", "workbench/diagnose/explain.py",
+       "seg_gain = (seg0 - r.seg_cost) / seg0", "seg_gain = (r.seg_cost - seg0) / seg0",
+       "closed-loop gain with the wrong sign", DIAG),
+    _m("closed-loop-veto-off", "diagnose", "workbench/diagnose/explain.py",
+       "            sig = False\n            reasons.append(f\"closed loop worse",
+       "            reasons.append(f\"closed loop worse",
+       "closed-loop veto reported but not applied", DIAG),
+    _m("bic-weight-sign", "diagnose", "workbench/diagnose/explain.py",
+       "o.weight = math.exp(0.5 * (o.dbic - ref)) / z",
+       "o.weight = math.exp(-0.5 * (o.dbic - ref)) / z",
+       "BIC weight favours the worst candidate", DIAG),
+    _m("rank-order-reversed", "diagnose", "workbench/diagnose/explain.py",
+       "-o.dbic if np.isfinite(o.dbic) else math.inf",
+       "o.dbic if np.isfinite(o.dbic) else math.inf",
+       "ranking: smallest dBIC first among equals in significance", DIAG),
+    _m("others-ignore-significance", "diagnose", "workbench/diagnose/explain.py",
+       "if r.significant and r.name not in used_names", "if r.name not in used_names",
+       "further findings drawn from non-significant candidates too", DIAG),
+    _m("confidence-runner-up-sign", "diagnose", "workbench/diagnose/evidence.py",
+       "d = r.dbic - runner_up.dbic", "d = runner_up.dbic - r.dbic",
+       "confidence against the runner-up inverted", DIAG),
+    _m("confidence-gain-weights", "diagnose", "workbench/diagnose/evidence.py",
+       "w *= 0.6 + 0.4 * min(", "w *= 0.4 + 0.6 * min(",
+       "confidence tempered by the gain with swapped weights", DIAG),
+    _m("evidence-percent", "diagnose", "workbench/diagnose/evidence.py",
+       "removes {100 * r.gain:.0f} %", "removes {r.gain:.0f} %",
+       "evidence sentence gives the gain as a fraction labelled %", DIAG),
+    _m("where-text-order", "diagnose", "workbench/diagnose/evidence.py",
+       'key=lambda kv: -kv[1]["ratio"]', 'key=lambda kv: kv[1]["ratio"]',
+       "evidence names the regimes where the mismatch is smallest", DIAG),
+    _m("refit-dof", "diagnose", "workbench/diagnose/refit.py",
+       "dof = max(m - len(free), 1)", "dof = max(m, 1)",
+       "refit residual variance without the degrees-of-freedom correction", DIAG),
+    _m("refit-inflation-inverted", "diagnose", "workbench/diagnose/refit.py",
+       "infl = max(m / n_eff, 1.0)", "infl = max(n_eff / m, 1.0)",
+       "refit covariance inflation inverted (never inflates)", DIAG),
+    _m("refit-log-std", "diagnose", "workbench/diagnose/refit.py",
+       "std[f.key] = v * sz", "std[f.key] = sz",
+       "log-scaled value's std not mapped back to its unit", DIAG),
+    _m("fd-jacobian-step", "diagnose", "workbench/diagnose/refit.py",
+       "J[:, i] = (fun(zi) - r0) / h", "J[:, i] = (fun(zi) - r0) / steps[i]",
+       "finite-difference Jacobian ignores the flipped step at an upper bound", DIAG),
+    # ------------------------------------------------------------------ identification
+    _m("arx-variance-n", "identify", "workbench/identify/arx/model.py",
+       "sigma2 = sse / dof", "sigma2 = sse / n_eq",
+       "issue 17: ARX noise variance sse / N instead of sse / (N - d)", ARX),
+    _m("arx-fpe-inverted", "identify", "workbench/identify/arx/model.py",
+       "fpe = loss * (1 + d / n_eq) / (1 - d / n_eq)",
+       "fpe = loss * (1 - d / n_eq) / (1 + d / n_eq)",
+       "issue 17: FPE formula inverted", ARX),
+    _m("arx-aic-penalty", "identify", "workbench/identify/arx/model.py",
+       "aic = n_eq * log_v + 2 * d", "aic = n_eq * log_v + d",
+       "AIC penalty d instead of 2 d", ARX),
+    _m("arx-bic-penalty", "identify", "workbench/identify/arx/model.py",
+       "bic = n_eq * log_v + d * math.log(n_eq)", "bic = n_eq * log_v + math.log(n_eq)",
+       "BIC penalty without the parameter count", ARX),
+    _m("arx-covariance-loss", "identify", "workbench/identify/arx/model.py",
+       "cov = sigma2 * (vs @ vs.T)", "cov = loss * (vs @ vs.T)",
+       "parameter covariance from the uncorrected loss", ARX),
+    _m("arx-offset-sign", "identify", "workbench/identify/arx/model.py",
+       "u_off = (a1 * y_off - c) / b1", "u_off = (a1 * y_off + c) / b1",
+       "ARX operating-point input offset with the constant's sign flipped", ARX),
+    _m("arx-max-lag-off-by-one", "identify", "workbench/identify/arx/checks.py",
+       "return max(na, nk + nb - 1)", "return max(na, nk + nb)",
+       "ARX maximum lag one too large (one equation lost)", ARX),
+    _m("arx-fit-percent-mean", "identify", "workbench/identify/arx/checks.py",
+       "den = float(np.linalg.norm(y - y.mean()))", "den = float(np.linalg.norm(y))",
+       "fit percentage against |y| instead of |y - mean|", ARX),
+    _m("arx-order-fit-sign", "identify", "workbench/identify/arx/order.py",
+       "value = -c.validation_fit", "value = c.validation_fit",
+       "order selection by fit picks the worst fit", ARX),
+    _m("arx-band-sqrt", "identify", "workbench/identify/arx/validation.py",
+       "band = CONFIDENCE_Z99 / math.sqrt(n)", "band = CONFIDENCE_Z99 / n",
+       "correlation band 1/N instead of 1/sqrt(N)", ARX),
+    _m("arx-autocorr-lag0", "identify", "workbench/identify/arx/validation.py",
+       "np.abs(r_e[1:]) > band", "np.abs(r_e[0:]) > band",
+       "autocorrelation count includes lag 0 (always outside)", ARX),
+    _m("rls-variance-den", "identify", "workbench/identify/rls/kernels.py",
+       "Vn = lk * V + eps * eps / den", "Vn = lk * V + eps * eps",
+       "RLS (casadi kernel): prior residual not scaled to the posterior one", RLS),
+    _m("rls-dof", "identify", "workbench/identify/rls/kernels.py",
+       "dof = ne_n - ca.trace(B)", "dof = ne_n",
+       "RLS (casadi kernel): variance without the degrees-of-freedom correction", RLS),
+    _m("rls-information-forgetting", "identify", "workbench/identify/rls/kernels.py",
+       "Mn = (lk * lk) * M + ca.mtimes(f, f.T)", "Mn = lk * M + ca.mtimes(f, f.T)",
+       "RLS (casadi kernel): information matrix forgotten with lambda, not lambda^2", RLS),
+    _m("rls-numpy-variance-den", "identify", "workbench/identify/rls/kernels.py",
+       "V = lk * V + eps * eps / den", "V = lk * V + eps * eps",
+       "RLS (numpy kernel): prior residual not scaled", RLS),
+    _m("greybox-cov-dof", "identify", "workbench/identify/grey_box/covariance.py",
+       "dof = max(1e-3, 1.0 - n_free_dims / max(prob.n_res, 1))", "dof = 1.0",
+       "grey-box residual variance without the degrees-of-freedom correction", GREY),
+    _m("greybox-cov-transform", "identify", "workbench/identify/grey_box/covariance.py",
+       "cov = cov_z * np.outer(D, D)", "cov = cov_z",
+       "grey-box covariance not mapped from optimiser to parameter units", GREY),
+    _m("valve-r2-total", "identify", "workbench/identify/valve/quality.py",
+       "ss_tot = float(np.sum((q - np.mean(q)) ** 2))", "ss_tot = float(np.sum(q ** 2))",
+       "valve fit R^2 against the raw instead of the centred sum of squares", VALVE),
+    _m("valve-zero-crossing-sign", "identify", "workbench/identify/valve/gain.py",
+       "pe = ps[j] - qs[j] / slope", "pe = ps[j] + qs[j] / slope",
+       "equilibrium pressure of the table: linear interpolation sign", VALVE),
+    _m("valve-gu-span", "identify", "workbench/identify/valve/gain.py",
+       "/ (ub - ua))", "/ (2.0 * (ub - ua)))",
+       "flow gain Gu from the table halved", VALVE),
+    _m("valve-lstsq-scale", "identify", "workbench/identify/valve/lstsq.py",
+       "return sol / scale", "return sol * scale",
+       "column scaling of the valve least squares undone the wrong way", VALVE),
+    # ------------------------------------------------------------------ control
+    _m("inversion-symbolic-factor", "control", "workbench/controllers/inversion.py",
+       "return ca.sign(G) * 2.0 * mag / (g1 + ca.sqrt(",
+       "return ca.sign(G) * mag / (g1 + ca.sqrt(",
+       "issue 17: symbolic Gamma^-1 closed form off by a factor 2", INV),
+    _m("inversion-numeric-factor", "control", "workbench/controllers/inversion.py",
+       "return np.sign(g) * 2.0 * mag / (g1 + root), 0",
+       "return np.sign(g) * mag / (g1 + root), 0",
+       "numeric Gamma^-1 closed form off by a factor 2", INV),
+    _m("inversion-symbolic-newton-sign", "control", "workbench/controllers/inversion.py",
+       "s = ca.fmin(ca.fmax(s - (val - mag) / slope, 0.0), 1.0)",
+       "s = ca.fmin(ca.fmax(s + (val - mag) / slope, 0.0), 1.0)",
+       "symbolic Newton step for Gamma of degree 3+ with the wrong sign", INV),
+    _m("command-for-gamma-saturation", "control", "workbench/controllers/inversion.py",
+       "sat = (g < g_lo) | (g > g_hi)", "sat = (g < g_lo) & (g > g_hi)",
+       "issue 17: command_for_gamma saturation flag never set", INV),
+    _m("limits-sampled-frequency", "control", "workbench/stability/limits.py",
+       "sampled_frequency=s_th / T,", "sampled_frequency=s_th * T,",
+       "issue 17: sampled_frequency = theta * T instead of theta / T", LIM),
+    _m("limits-delay-frequency", "control", "workbench/stability/limits.py",
+       "sampled_delay_frequency=d_th / T)", "sampled_delay_frequency=d_th * T)",
+       "sampled_delay_frequency = theta * T instead of theta / T", LIM),
+)
+
+
+# ------------------------------------------------------------------ checking the list
+def stale(mutations: Sequence[Mutation], root: Path = REPO) -> list[str]:
+    """Problems with the list: a missing file, or an original text that does not
+    occur exactly once in its file (the code moved: update the mutation)."""
+    problems = []
+    names = [m.name for m in mutations]
+    for n in sorted({n for n in names if names.count(n) > 1}):
+        problems.append(f"{n}: name used more than once")
+    for m in mutations:
+        path = root / m.file
+        if m.group not in GROUPS:
+            problems.append(f"{m.name}: unknown group {m.group!r}")
+        if not path.is_file():
+            problems.append(f"{m.name}: {m.file} does not exist")
+            continue
+        count = path.read_text().count(m.original)
+        if count != 1:
+            problems.append(f"{m.name}: original text occurs {count} times in {m.file} "
+                            f"(expected exactly once): {m.original!r}")
+        if m.original == m.replacement:
+            problems.append(f"{m.name}: replacement equals the original")
+    return problems
+
+
+def present_tests(m: Mutation, root: Path = REPO, collected: set[str] | None = None
+                  ) -> tuple[list[str], list[str]]:
+    """(the test ids of ``m`` to run, those skipped because they do not exist (yet)).
+
+    A file that does not exist is skipped. With ``collected`` (the node ids pytest
+    collects, see :func:`collect_nodes`), a node id ``file::test[...]`` it does not
+    know is skipped too; when none of a file's node ids is left (renamed), the whole
+    file runs instead.
+    """
+    have, missing = [], []
+    for t in m.tests:
+        f = t.split("::", 1)[0]
+        ok = (root / f).is_file() and ("::" not in t or collected is None or t in collected)
+        (have if ok else missing).append(t)
+    for f in dict.fromkeys(t.split("::", 1)[0] for t in missing if "::" in t):
+        if (root / f).is_file() and not any(h.split("::", 1)[0] == f for h in have):
+            have.append(f)
+    return have, missing
+
+
+def collect_nodes(mutations: Sequence[Mutation], workdir: Path, python: str) -> set[str]:
+    """Node ids pytest collects (unmutated) in the files that mutations name by node id."""
+    files = sorted({t.split("::", 1)[0] for m in mutations for t in m.tests
+                    if "::" in t and (workdir / t.split("::", 1)[0]).is_file()})
+    if not files:
+        return set()
+    env = dict(os.environ, PYTHONPATH=str(workdir))
+    proc = subprocess.run([python, "-m", "pytest", "--collect-only", "-q", "-p",
+                           "no:cacheprovider", "-o", "addopts=", *files], cwd=workdir,
+                          env=env, capture_output=True, text=True, timeout=600)
+    return {ln.strip() for ln in proc.stdout.splitlines() if "::" in ln}
+
+
+# ------------------------------------------------------------------ running
+@dataclasses.dataclass
+class Outcome:
+    """What happened to one mutant."""
+
+    name: str
+    group: str
+    status: str            # killed / survived / timeout / error
+    seconds: float
+    detail: str = ""
+    tests: tuple[str, ...] = ()
+    missing: tuple[str, ...] = ()
+
+
+def _copy_tree(dest: Path) -> None:
+    """Copy :data:`COPIED` of the repository into ``dest`` (no bytecode, no caches)."""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", ".pytest_cache")
+    for item in COPIED:
+        src = REPO / item
+        if src.is_dir():
+            shutil.copytree(src, dest / item, ignore=ignore)
+        elif src.is_file():
+            shutil.copy2(src, dest / item)
+
+
+def _drop_bytecode(path: Path) -> None:
+    """Remove the cached bytecode of ``path`` (a same-size edit in the same second
+    would otherwise be served from a stale .pyc)."""
+    for pyc in (path.parent / "__pycache__").glob(path.stem + ".*.pyc"):
+        pyc.unlink(missing_ok=True)
+
+
+def _summary_line(output: str) -> str:
+    """The first failing test (if any) and pytest's last line."""
+    lines = [ln for ln in output.strip().splitlines() if ln.strip()]
+    failed = [ln for ln in lines if ln.startswith(("FAILED", "ERROR"))]
+    tail = lines[-1] if lines else ""
+    return (failed[0] + " | " if failed else "") + tail
+
+
+def run_one(m: Mutation, workdir: Path, timeout: float, python: str,
+            collected: set[str] | None = None) -> Outcome:
+    """Plant ``m`` in the copy at ``workdir``, run its tests there, restore the file."""
+    have, missing = present_tests(m, workdir, collected)
+    if not have:
+        return Outcome(m.name, m.group, "error", 0.0,
+                       "none of its test files exists", (), tuple(missing))
+    path = workdir / m.file
+    text = path.read_text()
+    if text.count(m.original) != 1:
+        return Outcome(m.name, m.group, "error", 0.0,
+                       f"stale: original text occurs {text.count(m.original)} times",
+                       tuple(have), tuple(missing))
+    env = dict(os.environ, PYTHONPATH=str(workdir), PYTHONHASHSEED="0")
+    env.setdefault("WORKBENCH_CACHE", str(Path(tempfile.gettempdir()) / "workbench-mutation-jit"))
+    cmd = [python, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "--no-header",
+           "-o", "addopts=", *have]
+    t0 = time.monotonic()
+    try:
+        path.write_text(text.replace(m.original, m.replacement))
+        _drop_bytecode(path)
+        proc = subprocess.Popen(cmd, cwd=workdir, env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        try:
+            out, _ = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, 9)          # only the group this script started
+            proc.communicate()
+            return Outcome(m.name, m.group, "timeout", time.monotonic() - t0,
+                           f"over {timeout:g} s", tuple(have), tuple(missing))
+    finally:
+        path.write_text(text)
+        _drop_bytecode(path)
+    rc = proc.returncode
+    status = {0: "survived", 1: "killed", 2: "killed"}.get(rc, "error")
+    detail = _summary_line(out)
+    if rc == 2:
+        detail = "collection/import error: " + detail
+    elif status == "error":
+        detail = f"pytest exit {rc}: " + detail
+    return Outcome(m.name, m.group, status, time.monotonic() - t0, detail[:200],
+                   tuple(have), tuple(missing))
+
+
+def run_baseline(tests: Sequence[str], workdir: Path, timeout: float, python: str,
+                 collected: set[str] | None = None) -> Outcome:
+    """The targeted tests on the unmutated copy: they must pass, or a kill means nothing."""
+    m = Mutation("(baseline: no mutation)", "-", "pyproject.toml", "[tool.pytest",
+                 "[tool.pytest", "unmutated", tuple(tests))
+    return run_one(m, workdir, timeout, python, collected)
+
+
+def run_all(mutations: Sequence[Mutation], jobs: int, timeout: float, python: str,
+            baseline: bool = True, progress=print) -> tuple[list[Outcome], Outcome | None]:
+    """Run every mutant in ``jobs`` temporary copies of the repository."""
+    tmp = Path(tempfile.mkdtemp(prefix="workbench-mutation-"))
+    outcomes: dict[str, Outcome] = {}
+    base: Outcome | None = None
+    try:
+        slots = []
+        for i in range(max(1, jobs)):
+            d = tmp / f"copy{i}"
+            d.mkdir()
+            _copy_tree(d)
+            slots.append(d)
+        collected = collect_nodes(mutations, slots[0], python)
+        gone = sorted({t for m in mutations for t in present_tests(m, slots[0], collected)[1]
+                       if "::" in t})
+        if gone:
+            progress("skipping test node ids pytest does not collect: " + ", ".join(gone))
+        if baseline:
+            union = sorted({t for m in mutations
+                            for t in present_tests(m, slots[0], collected)[0]})
+            progress(f"baseline: {len(union)} test files, unmutated ...")
+            base = run_baseline(union, slots[0], 4 * timeout, python, collected)
+            verdict = "passed" if base.status == "survived" else f"FAILED ({base.status})"
+            progress(f"baseline: {verdict} ({base.seconds:.0f} s) {base.detail}")
+        free = list(slots)
+        lock = threading.Lock()
+        done = [0]
+
+        def work(m: Mutation) -> Outcome:
+            with lock:
+                d = free.pop()
+            try:
+                o = run_one(m, d, timeout, python, collected)
+            finally:
+                with lock:
+                    free.append(d)
+                    done[0] += 1
+                    progress(f"[{done[0]:>3}/{len(mutations)}] {o.status:<8} {o.seconds:6.1f} s "
+                             f"{m.group:<8} {m.name}")
+            return o
+
+        with ThreadPoolExecutor(max_workers=len(slots)) as ex:
+            for o in ex.map(work, mutations):
+                outcomes[o.name] = o
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return [outcomes[m.name] for m in mutations], base
+
+
+# ------------------------------------------------------------------ reporting
+def scores(outcomes: Sequence[Outcome]) -> dict[str, dict[str, int]]:
+    """Per group (and ``all``): killed, total and each status's count."""
+    out: dict[str, dict[str, int]] = {}
+    for o in outcomes:
+        for g in (o.group, "all"):
+            s = out.setdefault(g, {"killed": 0, "survived": 0, "timeout": 0, "error": 0,
+                                   "total": 0})
+            s[o.status] += 1
+            s["total"] += 1
+    return out
+
+
+def table(outcomes: Sequence[Outcome]) -> str:
+    """The outcome table, the skipped (missing) test files and the score per group."""
+    lines = [f"{'status':<9}{'secs':>6}  {'group':<9}{'mutation':<34}detail"]
+    for o in outcomes:
+        lines.append(f"{o.status:<9}{o.seconds:6.1f}  {o.group:<9}{o.name:<34}{o.detail}")
+    missing = sorted({t for o in outcomes for t in o.missing})
+    if missing:
+        lines.append("")
+        lines.append("tests named by mutations but missing (skipped): " + ", ".join(missing))
+    lines.append("")
+    sc = scores(outcomes)
+    for g in [*GROUPS, "all"]:
+        if g in sc:
+            s = sc[g]
+            extra = ", ".join(f"{s[k]} {k}" for k in ("survived", "timeout", "error") if s[k])
+            lines.append(f"score {g:<9} {s['killed']:>3} / {s['total']:<3} killed"
+                         + (f"  ({extra})" if extra else ""))
+    surv = [o.name for o in outcomes if o.status != "killed"]
+    if surv:
+        lines.append("not killed: " + ", ".join(surv))
+    return "\n".join(lines)
+
+
+def list_text(mutations: Sequence[Mutation]) -> str:
+    """The mutations, their files, descriptions and test files (``--list``)."""
+    rows = []
+    for m in mutations:
+        have, missing = present_tests(m)
+        tests = " ".join(Path(t).name for t in have)
+        miss = f"  [missing: {' '.join(Path(t).name for t in missing)}]" if missing else ""
+        rows.append(f"{m.group:<9}{m.name:<34}{m.file}\n{'':9}{m.description}\n{'':9}"
+                    f"tests: {tests}{miss}")
+    return "\n".join(rows) + f"\n{len(mutations)} mutations"
+
+
+def select(modules: str | None, only: str | None) -> list[Mutation]:
+    """The mutations of the ``--modules`` groups and ``--only`` names (all by default)."""
+    ms = list(MUTATIONS)
+    if modules:
+        want = [g.strip() for g in modules.split(",") if g.strip()]
+        bad = [g for g in want if g not in GROUPS]
+        if bad:
+            raise SystemExit(f"unknown module group(s) {bad}; expected some of {GROUPS}")
+        ms = [m for m in ms if m.group in want]
+    if only:
+        names = [n.strip() for n in only.split(",") if n.strip()]
+        known = {m.name for m in MUTATIONS}
+        bad = [n for n in names if n not in known]
+        if bad:
+            raise SystemExit(f"unknown mutation(s) {bad}; see --list")
+        ms = [m for m in ms if m.name in names]
+    return ms
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line; returns 0, or 1/2 when the list is stale."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--modules", help="comma-separated groups: " + ",".join(GROUPS))
+    ap.add_argument("--only", help="comma-separated mutation names")
+    ap.add_argument("--list", action="store_true", help="list the mutations, run nothing")
+    ap.add_argument("--jobs", type=int, default=1, help="mutants run at once (default 1)")
+    ap.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT,
+                    help=f"seconds per mutant (default {DEFAULT_TIMEOUT:g})")
+    ap.add_argument("--no-baseline", action="store_true",
+                    help="skip the run of the targeted tests on the unmutated copy")
+    ap.add_argument("--json", metavar="OUT", help="write the outcomes and scores as JSON")
+    ap.add_argument("--python", default=sys.executable, help="interpreter that runs pytest")
+    args = ap.parse_args(argv)
+    ms = select(args.modules, args.only)
+    problems = stale(ms)
+    if args.list:
+        print(list_text(ms))
+        for p in problems:
+            print("STALE: " + p)
+        return 1 if problems else 0
+    if problems:
+        print("stale mutations (fix tests/mutation.py before running):", *problems, sep="\n  ")
+        return 2
+    missing = sorted({t for m in ms for t in present_tests(m)[1]})
+    if missing:
+        print("skipping test files that do not exist yet: " + ", ".join(missing))
+    t0 = time.monotonic()
+    outcomes, base = run_all(ms, args.jobs, args.timeout, args.python,
+                             baseline=not args.no_baseline)
+    print()
+    print(table(outcomes))
+    print(f"wall time {time.monotonic() - t0:.0f} s with --jobs {args.jobs}")
+    if base is not None and base.status != "survived":
+        print(f"WARNING: the targeted tests do not pass unmutated ({base.status}: "
+              f"{base.detail}); kills are not evidence")
+    if args.json:
+        Path(args.json).write_text(json.dumps({
+            "outcomes": [dataclasses.asdict(o) for o in outcomes],
+            "scores": scores(outcomes),
+            "baseline": None if base is None else dataclasses.asdict(base),
+            "missing_test_files": missing,
+        }, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
