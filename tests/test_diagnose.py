@@ -23,6 +23,8 @@ import pytest
 
 from workbench.diagnose import synth
 
+import foreign_rig
+
 DURATION = 20.0
 
 #: (concealed kind, seed). Seeds are fixed for reproducibility; the draws are the
@@ -68,10 +70,33 @@ def _fit_improved(before: dict, after: dict) -> bool:
     return mean_a > mean_b and all(after[k] >= before[k] - 0.5 for k in before)
 
 
+def foreign_concealed(kind: str, seed: int, root: Path, duration: float = DURATION):
+    """(case, plant file, recording file): the concealed values drawn by
+    :func:`synth.concealed_case` (the draw only), the recording made by the independent
+    simulator :mod:`foreign_rig` (its own valve, lines, chambers, friction law), once
+    per session."""
+    key = ("foreign", kind, seed, duration)
+    if key not in _CACHE:
+        case = synth.concealed_case(kind, seed=seed)
+        d = root / f"foreign_{kind}_{seed}_{int(duration)}"
+        d.mkdir(parents=True, exist_ok=True)
+        plant_file = case.write_nominal(d / "plant.toml")
+        vals = dict(case.values)
+        fr = None
+        if kind == "dry_friction":
+            fr = {"coulomb": vals.pop("friction.coulomb"), "static": vals.pop("friction.static"),
+                  "stribeck": vals.pop("friction.stribeck_velocity")}
+        ref = synth.rich_reference(seed, duration, case.nominal["cylinder.stroke"])
+        rec = foreign_rig.record(plant_file, ref, duration, seed=seed + 7, overrides=vals,
+                                 friction=fr)
+        _CACHE[key] = (case, plant_file, rec.to_csv(d / "recording.csv"), rec)
+    return _CACHE[key]
+
+
 @pytest.mark.parametrize("kind,seed", CASES, ids=[c[0] for c in CASES])
 def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
     from workbench.diagnose import diagnose
-    case, plant_file, rec_file, _ = concealed(kind, seed, diag_dir)
+    case, plant_file, rec_file, _ = foreign_concealed(kind, seed, diag_dir)
     d = diagnose(plant_file, rec_file)
     res = d.to_dict()
     sc = synth.score(case, res)
