@@ -159,7 +159,9 @@ class ForeignRig:
             rho = 0.5 * (p_i + p_next) / (R_AIR * T)
             vel = q_i / (rho * area)
             re = max(rho * abs(vel) * d / MU_AIR, 1.0)
-            drop = (32.0 * MU_AIR * vel / (d * d) + 0.158 * re ** -0.25 * rho * vel * abs(vel) / d) * seg
+            # Hagen-Poiseuille 32 mu v / d^2 plus Blasius 0.316 Re^-0.25 / d * rho v|v| / 2
+            drop = (32.0 * MU_AIR * vel / (d * d)
+                    + 0.158 * re ** -0.25 * rho * vel * abs(vel) / d) * seg
             dz[j + N + i] = area / seg * (p_i - p_next - drop)
         return z[j + 2 * N - 1]
 
@@ -171,7 +173,8 @@ class ForeignRig:
         if self.spool:
             w = 2 * math.pi * P["valve.bandwidth"]
             y, yd = z[self.i_spool], z[self.i_spool + 1]
-            dz[self.i_spool], dz[self.i_spool + 1] = yd, w * w * (u - y) - 2 * P["valve.damping"] * w * yd
+            dz[self.i_spool] = yd
+            dz[self.i_spool + 1] = w * w * (u - y) - 2 * P["valve.damping"] * w * yd
             u_sp = y
         op = self.opening(u_sp)
         o_in, o_out = max(op, 0.0), max(-op, 0.0)
@@ -192,12 +195,14 @@ class ForeignRig:
             qa = self.line(z, j, qa, pa, dz)
             qb = self.line(z, j + 2 * LINE_NODES, qb, pb, dz)
         if self.droop:
-            q_reg = iso_flow(P["supply.regulator_conductance"], B_NOZZLE, P["supply.pressure"], ps, T)
+            q_reg = iso_flow(P["supply.regulator_conductance"], B_NOZZLE, P["supply.pressure"],
+                             ps, T)
             dz[self.i_ps] = self.k * R_AIR * T / P["supply.reservoir_volume"] * (q_reg - sa - sb)
         la = lb = 0.0
         if "leakage.conductance_to_atmosphere" in P:
             c = P["leakage.conductance_to_atmosphere"]
-            la, lb = iso_flow(c, B_NOZZLE, pa, self.patm, ta), iso_flow(c, B_NOZZLE, pb, self.patm, tb)
+            la = iso_flow(c, B_NOZZLE, pa, self.patm, ta)
+            lb = iso_flow(c, B_NOZZLE, pb, self.patm, tb)
         cross = P.get("leakage.cross_piston", 0.0) * (pa - pb)
         va, vb = self.vol_a(x), self.vol_b(x)
         if self.heat is None:
@@ -299,5 +304,6 @@ def record(plant_file, reference, duration, seed, **kw):
     X = np.round((Z[:, 0] + nx) / lsb_x) * lsb_x
     PA = np.round((Z[:, 2] + rng.normal(0, 500.0, n)) / lsb_p) * lsb_p
     PB = np.round((Z[:, 3] + rng.normal(0, 500.0, n)) / lsb_p) * lsb_p
-    return Recording.from_arrays(t, u=U, x=X, p_a=PA, p_b=PB, r=np.asarray(reference(t), float),
-                                 metadata={"sample_time": t[1] - t[0], "source": "foreign simulator"})
+    meta = {"sample_time": t[1] - t[0], "source": "tests/foreign_rig.py"}
+    return Recording.from_arrays(t, u=U, x=X, p_a=PA, p_b=PB,
+                                 r=np.asarray(reference(t), float), metadata=meta)

@@ -54,6 +54,21 @@ ALSO_CHECKED = {"dry_friction": ("friction.static",),
                 "heat_transfer": ("gas.heat_transfer_coefficient",),
                 "leakage_cross": ("leakage.cross_piston",)}
 
+#: Tighter bounds (relative) where the foreign rig shares the law with the workbench's
+#: model (ISO 6358 edges, spool overlap and offset, 2nd-order spool, rigid mass, laminar
+#: cross leak) and only the integrator and sensor noise differ. Measured errors on the
+#: foreign recordings (seed 3): coulomb 0.09 %, static 0.7 % (with the smooth friction
+#: law), deadband 0.008 %, null offset 0.007 %, bandwidth 0.3 %, damping 0.3 %, leak to
+#: atmosphere 0.004 %, mass 0.0005 %, cross leak 2.1 %, heat coefficient 3.2 % (the
+#: (p, m) energy balance); 5 % (10 % for the last two) leaves a margin of 3 or more.
+#: Lines (length +11 %, diameter -4.6 %: 5 pi-segments against the diagnosis's 3) and
+#: supply droop (volume +12.5 %, conductance +6.6 %: the regulator works near p_dw/p_up
+#: = 1, where the two laminar patches of psi differ) keep the issue's 30 %.
+TIGHT = {"friction.coulomb": 0.05, "friction.static": 0.05, "valve.deadband": 0.05,
+         "valve.null_offset": 0.05, "valve.bandwidth": 0.05, "valve.damping": 0.05,
+         "leakage.conductance_to_atmosphere": 0.05, "load.mass": 0.05,
+         "leakage.cross_piston": 0.10, "gas.heat_transfer_coefficient": 0.10}
+
 _CACHE: dict[tuple, tuple] = {}
 
 
@@ -127,6 +142,10 @@ def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
     for key in ALSO_CHECKED.get(kind, ()):
         true = case.values[key]
         assert abs(par[key.split(".", 1)[1]] - true) <= 0.3 * abs(true), f"{key}: {info}"
+    for key in (k for k in case.values if k in TIGHT):
+        got = par[key] if kind == "mass_error" else par[key.split(".", 1)[1]]
+        assert abs(got - case.values[key]) <= TIGHT[key] * abs(case.values[key]), \
+            f"{key} beyond {TIGHT[key]:.0%}: {info}"
     if kind in ("leakage", "leakage_cross"):
         # the leak put on the right path: the other path's flow (to atmosphere from 5 bar,
         # ISO 6358 choked q = C p rho0; across the piston at 1 bar, q = c dp) < 5 % of the
@@ -134,8 +153,8 @@ def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
         q_atm = par["conductance_to_atmosphere"] * 5e5 * 1.185
         q_cross = par.get("cross_piston", 0.0) * 1e5
         if kind == "leakage":
-            assert q_cross < 0.05 * case.values["leakage.conductance_to_atmosphere"] * 5e5 * 1.185, \
-                info
+            q_true = case.values["leakage.conductance_to_atmosphere"] * 5e5 * 1.185
+            assert q_cross < 0.05 * q_true, info
         else:
             assert q_atm < 0.05 * case.values["leakage.cross_piston"] * 1e5, info
     assert _fit_improved(res["fit_before"], res["fit_after"]), \

@@ -4,8 +4,8 @@ The recording comes from the small independent simulator :mod:`foreign_rig` (num
 and scipy ``solve_ivp``, LSODA, one call per 10 ms controller period): its own ISO
 6358 four-edge valve with a linear (laminar) patch near equal pressures, the
 polytropic chambers, and a *different friction law*: a smooth Stribeck curve times
-tanh(v / 2 mm/s) plus viscous friction, where the workbench uses Karnopp stick-slip. The diagnosis must
-still name dry friction and find the Coulomb level within 30 %.
+tanh(v / 2 mm/s) plus viscous friction, where the workbench uses Karnopp stick-slip.
+The diagnosis must still name dry friction and find the Coulomb level within 30 %.
 """
 
 from __future__ import annotations
