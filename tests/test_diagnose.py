@@ -2,15 +2,21 @@
 
 Each concealed case is a 20 s, 1 kHz closed-loop recording of the 25 mm rig (PD loop
 kp = 5 V/m, kd = 0.1 V s/m at 10 ms) with sensor noise and 12-bit quantisation on x
-and the pressures, made by :mod:`workbench.diagnose.synth` with the effect's values
-drawn (seeded) from realistic ranges. The diagnosis gets only the nominal plant file
-and the CSV. Recordings are made once per test session.
+and the pressures. The effect's values are drawn (seeded) from realistic ranges by
+:func:`workbench.diagnose.synth.concealed_case`, but the recording of every
+concealed-effect case is made by the independent simulator :mod:`foreign_rig`
+(tests/foreign_rig.py: numpy/scipy, its own valve, lines in 5 pi-segments, (p, m)
+energy balance, smooth friction law), not by the workbench's own model, so a wrong
+law shared by the simulator and the diagnosis cannot pass unseen (issue 17). The
+other tests here use :mod:`workbench.diagnose.synth` recordings. The diagnosis gets
+only the nominal plant file and the CSV. Recordings are made once per test session.
 
 Tolerances: the fitted value of the checked keys within 30 % of the concealed one
 (the issue's bound), for the keys of ``synth.CHECKED_KEYS`` and :data:`ALSO_CHECKED`;
 exactly one finding (one effect is concealed); "fit improves": the mean fit over the
 recorded signals rises and no signal loses more than 0.5 percentage points (a
 pressure-only effect may leave the position fit at 99.9 % unchanged within rounding).
+None of these had to change for the foreign recordings.
 """
 
 from __future__ import annotations
@@ -23,13 +29,19 @@ import pytest
 
 from workbench.diagnose import synth
 
+import foreign_rig
+
 DURATION = 20.0
 
 #: (concealed kind, seed). Seeds are fixed for reproducibility; the draws are the
 #: generator's (values printed on failure).
 CASES = [("none", 3), ("dry_friction", 3), ("valve_deadband", 3), ("valve_offset", 3),
          ("valve_dynamics", 3), ("line_dynamics", 3), ("leakage", 3), ("supply_droop", 3),
-         ("heat_transfer", 3), ("mass_error", 3)]
+         ("heat_transfer", 3), ("mass_error", 3), ("leakage_cross", 3)]
+
+#: Foreign-only cases: (synth kind, concealed values). A worn piston seal passing
+#: 2e-9 kg/(s Pa) x 1 bar = 2e-4 kg/s (10 l/min ANR, 0.5 % of the valve's full flow).
+FOREIGN_VALUES = {"leakage_cross": ("leakage", {"leakage.cross_piston": 2e-9})}
 
 #: Fitted values checked here (besides ``synth.CHECKED_KEYS``), each within 30 % of the
 #: concealed value (the issue's bound), computed in the test from the JSON: every
@@ -39,7 +51,23 @@ ALSO_CHECKED = {"dry_friction": ("friction.static",),
                 "valve_dynamics": ("valve.bandwidth", "valve.damping"),
                 "line_dynamics": ("lines.length", "lines.diameter"),
                 "supply_droop": ("supply.reservoir_volume", "supply.regulator_conductance"),
-                "heat_transfer": ("gas.heat_transfer_coefficient",)}
+                "heat_transfer": ("gas.heat_transfer_coefficient",),
+                "leakage_cross": ("leakage.cross_piston",)}
+
+#: Tighter bounds (relative) where the foreign rig shares the law with the workbench's
+#: model (ISO 6358 edges, spool overlap and offset, 2nd-order spool, rigid mass, laminar
+#: cross leak) and only the integrator and sensor noise differ. Measured errors on the
+#: foreign recordings (seed 3): coulomb 0.09 %, static 0.7 % (with the smooth friction
+#: law), deadband 0.008 %, null offset 0.007 %, bandwidth 0.3 %, damping 0.3 %, leak to
+#: atmosphere 0.004 %, mass 0.0005 %, cross leak 2.1 %, heat coefficient 3.2 % (the
+#: (p, m) energy balance); 5 % (10 % for the last two) leaves a margin of 3 or more.
+#: Lines (length +11 %, diameter -4.6 %: 5 pi-segments against the diagnosis's 3) and
+#: supply droop (volume +12.5 %, conductance +6.6 %: the regulator works near p_dw/p_up
+#: = 1, where the two laminar patches of psi differ) keep the issue's 30 %.
+TIGHT = {"friction.coulomb": 0.05, "friction.static": 0.05, "valve.deadband": 0.05,
+         "valve.null_offset": 0.05, "valve.bandwidth": 0.05, "valve.damping": 0.05,
+         "leakage.conductance_to_atmosphere": 0.05, "load.mass": 0.05,
+         "leakage.cross_piston": 0.10, "gas.heat_transfer_coefficient": 0.10}
 
 _CACHE: dict[tuple, tuple] = {}
 
@@ -68,10 +96,34 @@ def _fit_improved(before: dict, after: dict) -> bool:
     return mean_a > mean_b and all(after[k] >= before[k] - 0.5 for k in before)
 
 
+def foreign_concealed(kind: str, seed: int, root: Path, duration: float = DURATION):
+    """(case, plant file, recording file): the concealed values drawn by
+    :func:`synth.concealed_case` (the draw only), the recording made by the independent
+    simulator :mod:`foreign_rig` (its own valve, lines, chambers, friction law), once
+    per session."""
+    key = ("foreign", kind, seed, duration)
+    if key not in _CACHE:
+        synth_kind, values = FOREIGN_VALUES.get(kind, (kind, None))
+        case = synth.concealed_case(synth_kind, seed=seed, values=values)
+        d = root / f"foreign_{kind}_{seed}_{int(duration)}"
+        d.mkdir(parents=True, exist_ok=True)
+        plant_file = case.write_nominal(d / "plant.toml")
+        vals = dict(case.values)
+        fr = None
+        if kind == "dry_friction":
+            fr = {"coulomb": vals.pop("friction.coulomb"), "static": vals.pop("friction.static"),
+                  "stribeck": vals.pop("friction.stribeck_velocity")}
+        ref = synth.rich_reference(seed, duration, case.nominal["cylinder.stroke"])
+        rec = foreign_rig.record(plant_file, ref, duration, seed=seed + 7, overrides=vals,
+                                 friction=fr)
+        _CACHE[key] = (case, plant_file, rec.to_csv(d / "recording.csv"), rec)
+    return _CACHE[key]
+
+
 @pytest.mark.parametrize("kind,seed", CASES, ids=[c[0] for c in CASES])
 def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
     from workbench.diagnose import diagnose
-    case, plant_file, rec_file, _ = concealed(kind, seed, diag_dir)
+    case, plant_file, rec_file, _ = foreign_concealed(kind, seed, diag_dir)
     d = diagnose(plant_file, rec_file)
     res = d.to_dict()
     sc = synth.score(case, res)
@@ -81,13 +133,30 @@ def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
         assert res["findings"] == []
         assert res["fit_after"] == res["fit_before"]
         return
-    assert sc["checked_ok"], f"fitted values off by {sc['relative_errors']}: {info}"
+    # synth's checked keys are those of its own draw (not of a FOREIGN_VALUES case)
+    assert sc["checked_ok"] or kind in FOREIGN_VALUES, \
+        f"fitted values off by {sc['relative_errors']}: {info}"
     # one effect is concealed: nothing else may be named
     assert len(res["findings"]) == 1, info
     par = res["findings"][0]["parameters"]
     for key in ALSO_CHECKED.get(kind, ()):
         true = case.values[key]
         assert abs(par[key.split(".", 1)[1]] - true) <= 0.3 * abs(true), f"{key}: {info}"
+    for key in (k for k in case.values if k in TIGHT):
+        got = par[key] if kind == "mass_error" else par[key.split(".", 1)[1]]
+        assert abs(got - case.values[key]) <= TIGHT[key] * abs(case.values[key]), \
+            f"{key} beyond {TIGHT[key]:.0%}: {info}"
+    if kind in ("leakage", "leakage_cross"):
+        # the leak put on the right path: the other path's flow (to atmosphere from 5 bar,
+        # ISO 6358 choked q = C p rho0; across the piston at 1 bar, q = c dp) < 5 % of the
+        # concealed path's at the same pressures
+        q_atm = par["conductance_to_atmosphere"] * 5e5 * 1.185
+        q_cross = par.get("cross_piston", 0.0) * 1e5
+        if kind == "leakage":
+            q_true = case.values["leakage.conductance_to_atmosphere"] * 5e5 * 1.185
+            assert q_cross < 0.05 * q_true, info
+        else:
+            assert q_atm < 0.05 * case.values["leakage.cross_piston"] * 1e5, info
     assert _fit_improved(res["fit_before"], res["fit_after"]), \
         f"fit before {res['fit_before']} after {res['fit_after']}"
     f0 = res["findings"][0]
