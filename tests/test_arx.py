@@ -10,6 +10,7 @@ sigma^2 (Phi' Phi)^-1 holds; the tests check both by Monte Carlo.
 from __future__ import annotations
 
 import dataclasses
+import math
 import json
 
 import numpy as np
@@ -680,3 +681,23 @@ def test_order_selection_validation_columns_by_hand():
     by_fit = select_order(y[est], u[est], range(1, 3), range(1, 3), range(1, 2),
                           criterion="fit", validation=(y[val], u[val]))
     assert by_fit.orders == max(hand, key=lambda o: (hand[o][1], -(o[0] + o[1])))
+
+
+def test_correlations_outside_the_band_counted_by_hand():
+    """The counts of correlations outside the 99 % band, recomputed here: lags 1..M of
+    the residual autocorrelation (lag 0 is 1 by definition and never counted) and all
+    lags -M..M of the residual-input cross-correlation, from the residuals themselves
+    (numpy sums written out, 1/N normalised as Ljung 16.6)."""
+    y = table_i(U, SIGMA, seed=21)
+    bad = validate(fit_arx(y[:N_EST], U[:N_EST], (1, 1, 2), sample_time=T), y[N_EST:], U[N_EST:])
+    e = bad.residuals - bad.residuals.mean()
+    n, m = e.size, int(bad.lags[-1])
+    r = np.array([e[k:] @ e[: n - k] for k in range(m + 1)]) / (e @ e)
+    band = 2.5758293035489004 / math.sqrt(n)
+    assert bad.band == pytest.approx(band, rel=1e-15)
+    assert bad.autocorrelation_outside == int(np.sum(np.abs(r[1:]) > band))
+    uc = bad.u[bad.max_lag:] - bad.u[bad.max_lag:].mean()
+    c = np.array([(e[t:] @ uc[: n - t]) if t >= 0 else (e[: n + t] @ uc[-t:])
+                  for t in range(-m, m + 1)]) / math.sqrt((e @ e) * (uc @ uc))
+    assert bad.cross_correlation_outside == int(np.sum(np.abs(c) > band))
+    assert 0 < bad.autocorrelation_outside <= m       # the undermodelled fit is coloured

@@ -649,3 +649,14 @@ def test_plant_input_affine_rows():
         # polytropic chambers (physics.md): dp/dt = k/V (r T q - p dV/dt)
         assert d["p_a"] == pytest.approx(_K / v_a * (R * _T * q_a - p_a * _AREA * v), rel=REL)
         assert d["p_b"] == pytest.approx(_K / v_b * (R * _T * q_b + p_b * _AREA * v), rel=REL)
+
+
+def test_speed_of_sound_is_adiabatic():
+    """a = sqrt(gamma R T) (adiabatic; Newton's isothermal sqrt(R T) is 16 % low): at
+    20 degC in air, 343.2 m/s, the textbook value (e.g. White, Fluid Mechanics, table
+    A.2), and it scales with sqrt(T). Written out with math: rounding only, 1e-12."""
+    from workbench.physics import gas
+    a = math.sqrt(1.4 * 287.0 * 293.15)
+    assert a == pytest.approx(343.2, abs=0.1)
+    assert gas.speed_of_sound(293.15, 1.4, 287.0) == pytest.approx(a, rel=1e-12)
+    assert gas.speed_of_sound(4 * 293.15, 1.4, 287.0) == pytest.approx(2 * a, rel=1e-12)
