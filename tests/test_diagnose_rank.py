@@ -506,3 +506,66 @@ def test_evidence_text_states_the_fitted_values_and_the_gain():
     assert "load.mass fits as 1.5 instead of the nominal 1.2" in t
     t = _evidence("heat_transfer", 0.3, values={"gas.heat_transfer_coefficient": 0.45})
     assert "(0.45 W/K)" in t
+
+
+# ---------------------------------------------------------------------- refit uncertainty
+def test_uncertainty_is_the_gauss_newton_covariance_written_out():
+    """refit._uncertainty on a hand-made linear problem: residuals r of m = 40 samples,
+    Jacobian J (2 free values) known, so cov = (J'J)^-1 r'r / (m - 2) inflated by
+    m / n_eff when the residuals are correlated (n_eff = 10 effective samples: x4),
+    never deflated (n_eff > m: x1). A log-scaled value v has std v sigma_z and the
+    interval v exp(+-1.96 sigma_z); a linear one with scale s: s sigma_z and
+    v +- 1.96 s sigma_z (delta method, written out here with numpy)."""
+    from workbench.diagnose.refit import _uncertainty
+
+    rng = np.random.default_rng(5)
+    m = 40
+    J = np.column_stack([np.ones(m), np.linspace(-1.0, 1.0, m)])
+    r = rng.standard_normal(m)
+    free = [Free("leakage.k", 1e-12, 1e-6, 1e-9, log=True),
+            Free("load.mass", 0.1, 10.0, 1.0, log=False, scale=2.0)]
+    vals = {"leakage.k": 3e-9, "load.mass": 1.7}
+    cov_z = np.linalg.inv(J.T @ J) * (r @ r) / (m - 2)
+    for n_eff, infl in ((10.0, 4.0), (400.0, 1.0)):
+        std, ci = _uncertainty(free, vals, J, r, n_eff)
+        sz = np.sqrt(np.diag(cov_z) * infl)
+        assert std["leakage.k"] == pytest.approx(3e-9 * sz[0], rel=1e-10)
+        assert ci["leakage.k"] == pytest.approx(
+            (3e-9 * math.exp(-1.96 * sz[0]), 3e-9 * math.exp(1.96 * sz[0])), rel=1e-10)
+        assert std["load.mass"] == pytest.approx(2.0 * sz[1], rel=1e-10)
+        assert ci["load.mass"] == pytest.approx(
+            (1.7 - 1.96 * 2.0 * sz[1], 1.7 + 1.96 * 2.0 * sz[1]), rel=1e-10)
+
+
+def test_fd_jacobian_steps_back_at_an_upper_bound():
+    """refit._fd_jacobian: forward differences of a quadratic, with the step turned
+    back where it would leave the upper bound. For f(z) = (z0^2, 3 z1) the forward
+    difference is 2 z0 + h (exactly, up to rounding) and the backward one 2 z0 - h."""
+    from workbench.diagnose.refit import _fd_jacobian
+
+    def fun(z):
+        return np.array([z[0] ** 2, 3.0 * z[1]])
+
+    z = np.array([1.0, 2.0])
+    steps = np.array([1e-3, 1e-3])
+    r0 = fun(z)
+    J = _fd_jacobian(fun, z, r0, steps, (np.array([-5.0, -5.0]), np.array([5.0, 5.0])))
+    assert J[0, 0] == pytest.approx(2.0 + 1e-3, rel=1e-9) and J[1, 1] == pytest.approx(3.0)
+    J = _fd_jacobian(fun, z, r0, steps, (np.array([-5.0, -5.0]), np.array([1.0005, 5.0])))
+    assert J[0, 0] == pytest.approx(2.0 - 1e-3, rel=1e-9)     # z0 + h leaves [.., 1.0005]
+    assert J[0, 1] == 0.0 and J[1, 0] == 0.0
+
+
+def test_further_findings_are_drawn_from_significant_candidates_only():
+    """explain._others: what may be refitted on top of a finding are the significant
+    candidates (dBIC and gain over their thresholds) of other effects, at most three,
+    in ranking order. Here three non-significant candidates rank before two
+    significant ones: only the significant ones are offered."""
+    n = 200.0
+    chosen = Chosen.nothing(400.0, None, np.zeros(3))
+    chosen.add(rank([fit("a", 100.0, effect="leakage")], 400.0, None, n)[0])
+    ranking = rank([fit("a", 100.0, effect="leakage"),
+                    fit("p", 399.0), fit("q", 398.5), fit("r", 398.0),     # gain < 1 %
+                    fit("s", 150.0), fit("t", 160.0)], 400.0, None, n)
+    offered = [x.name for x in explain._others(ranking, chosen)]
+    assert offered == ["s", "t"]
