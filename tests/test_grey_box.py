@@ -319,3 +319,31 @@ def test_two_recordings_and_measured_initial_state(truth_plant, start_plant, noi
     # fixing noisy initial values biases an open-loop replay a little (documented):
     # check 1 % instead of the confidence intervals
     assert np.all(np.abs(res.values_ / truth - 1.0) < 1e-2)
+
+
+def test_covariance_is_the_constrained_gauss_newton_one_written_out():
+    """grey_box's _covariance on a hand-made linear problem (one recording, one signal,
+    N = 30 residuals, 2 parameters, 1 state: 3 free dimensions, no continuity
+    constraint): cov = (J'J)^-1 s2 with s2 = mean(r^2) / (1 - 3/N) (the residual
+    variance with its degrees-of-freedom correction), mapped to parameter units by
+    dvalue/dz = 2 and 0.5. The 1e-10 relative regularisation of the solve moves the
+    result by ~1e-10: 1e-8 relative."""
+    import scipy.sparse as sp
+    from types import SimpleNamespace
+    from workbench.identify.grey_box.covariance import _covariance
+
+    n = 30
+    rng = np.random.default_rng(3)
+    J = np.column_stack([np.ones(n), np.linspace(0.0, 1.0, n)])
+    r = rng.standard_normal(n)
+    prob = SimpleNamespace(
+        nsel=2, nx=1, ny=1, M=1, ntot=n, n_res=n, W=np.ones((n, 1)),
+        data=[SimpleNamespace(first=0, n_int=n)],
+        residual_jacobian=lambda w: (sp.csr_matrix(J), r),
+        constraint_jacobian=lambda w: sp.csr_matrix((0, 2)))
+    params = [SimpleNamespace(dvalue=lambda z: 2.0), SimpleNamespace(dvalue=lambda z: 0.5)]
+    std, corr, ok = _covariance(prob, np.zeros(2), np.zeros(2, dtype=bool), params, np.zeros(2))
+    cov = np.linalg.inv(J.T @ J) * np.mean(r ** 2) / (1.0 - 3.0 / n)
+    assert ok
+    assert std == pytest.approx(np.sqrt(np.diag(cov)) * np.array([2.0, 0.5]), rel=1e-8)
+    assert corr[0, 1] == pytest.approx(cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1]), rel=1e-8)
