@@ -165,16 +165,21 @@ def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
     assert f0["fit_after"] == res["fit_after"] or len(res["findings"]) > 1
 
 
-def test_json_contract_and_files(diag_dir, tmp_path):
+def test_json_contract_and_files(diag_dir, tmp_path, monkeypatch):
     """diagnosis.json has exactly the keys of formats.md section 4; the augmented plant
     file loads and has the effect; the CLI writes report.html."""
+    import workbench.diagnose as wd
     from workbench.__main__ import main
     from workbench import Plant
-    case, plant_file, rec_file, _ = concealed("valve_offset", 5, diag_dir, duration=8.0)
+    case, plant_file, rec_file, rec = concealed("valve_offset", 5, diag_dir, duration=8.0)
     out = tmp_path / "out"
+    seen = []
+    real = wd.diagnose
+    monkeypatch.setattr(wd, "diagnose", lambda *a, **kw: seen.append(real(*a, **kw)) or seen[-1])
     rc = main(["diagnose", str(plant_file), str(rec_file), "--out", str(out), "--quiet"])
     assert rc == 0
     res = json.loads((out / "diagnosis.json").read_text())
+    _check_diagnosis_values(res, json.loads((out / "details.json").read_text()), seen[0], rec)
     assert list(res) == ["plant", "recording", "fit_before", "fit_after", "findings"]
     assert set(res["fit_before"]) == {"x", "p_a", "p_b"}
     assert res["findings"], "an offset of 0.1-0.3 V must be found even in 8 s"
@@ -188,6 +193,65 @@ def test_json_contract_and_files(diag_dir, tmp_path):
     html = (out / "report.html").read_text()
     assert "Candidates ranked by evidence" in html and "valve_offset" in html
     assert (out / "report.pdf").stat().st_size > 10_000
+
+
+def _nrmse(y, ym):
+    """formats.md section 4: 100 (1 - ||y - y_model|| / ||y - mean(y)||), over the samples
+    the replay reached (finite)."""
+    y, ym = np.asarray(y, float), np.asarray(ym, float)
+    ok = np.isfinite(ym)
+    y, ym = y[ok], ym[ok]
+    return 100.0 * (1.0 - np.linalg.norm(y - ym) / np.linalg.norm(y - y.mean()))
+
+
+def _check_diagnosis_values(res, details, d, rec):
+    """The values of diagnosis.json (issue 17), each recomputed here: the fits from the
+    nominal and augmented replays by the NRMSE formula (written to 2 decimals: 0.006
+    allows the rounding), the last finding's fit is the overall fit after, parameters
+    and their 95 % intervals against the ranked candidate in details.json (value +-
+    1.96 std, or v exp(+-1.96 std / v) for a log-scaled value), the confidence by the
+    formula of evidence.confidence written out, and the intervals inside the recording."""
+    import math
+    assert res["plant"] == d.plant_file and res["recording"] == d.recording_file
+    for key, run in (("fit_before", d.replay_nominal), ("fit_after", d.replay_augmented)):
+        assert set(res[key]) == {"x", "p_a", "p_b"}
+        for s, v in res[key].items():
+            assert v == pytest.approx(_nrmse(rec[s], run[s]), abs=6e-3), (key, s)
+    assert res["findings"][-1]["fit_after"] == res["fit_after"]
+    cands = details["candidates"]
+    t0, t1 = float(rec.t[0]), float(rec.t[-1])
+    for i, (f, fo) in enumerate(zip(res["findings"], d.findings)):
+        r = next(c for c in cands if c["candidate"] == fo.name)
+        assert r["effect"] == f["effect"] and r["significant"]
+        for k, v in f["parameters"].items():
+            key = next(q for q in r["values"] if q.split(".")[-1] == k)
+            # written to 6 significant digits
+            assert v == pytest.approx(r["values"][key], rel=1e-5), k
+            lo, hi = r["ci95"][key]
+            sd, val = r["std"][key], r["values"][key]
+            if math.isclose(hi - val, val - lo, rel_tol=1e-6):
+                half = 1.96 * sd
+            else:                                          # log-scaled: v exp(+-1.96 sd / v)
+                half = val * (math.exp(1.96 * sd / val) - 1.0)
+            # 1.96 or scipy's 1.959964 (a grey-box polish): 1e-4 relative covers both
+            assert hi - val == pytest.approx(half, rel=1e-4), k
+        runner = next((c for c in cands if c["candidate"] != fo.name), None) if i == 0 else None
+
+        def logistic(x):
+            return 1.0 / (1.0 + math.exp(-0.5 * x)) if x < 60 else 1.0
+        w = logistic(r["dbic"])
+        if runner is not None and runner["dbic"] is not None and math.isfinite(runner["dbic"]):
+            dd = r["dbic"] - runner["dbic"]
+            w = min(1.0 / (1.0 + math.exp(-0.5 * dd)) if abs(dd) < 60 else float(dd > 0), w)
+        w *= 0.6 + 0.4 * min(max(r["gain"], 0.0), 1.0)
+        if r["consistency"] is not None and r["consistency"] < 0.5:
+            w *= 0.85
+        assert 0.0 <= f["confidence"] <= 0.99
+        assert f["confidence"] == pytest.approx(min(w, 0.99), abs=5e-4)   # rounded to 3
+        assert f["where"], "a finding shows somewhere"
+        for a, b in f["where"]:
+            assert t0 <= a < b <= t1
+        assert all(f["where"][j][1] <= f["where"][j + 1][0] for j in range(len(f["where"]) - 1))
 
 
 def test_position_only_recording_still_reveals_friction(diag_dir):

@@ -224,6 +224,22 @@ def test_cli_writes_estimates_plant_and_figure(tmp_path, start_plant, noisy, cap
     est = Plant.from_toml(out / "plant_estimated.toml")
     assert est.params["load.mass"] == pytest.approx(saved["parameters"]["load.mass"]["value"])
     assert est.params["load.mass"] == pytest.approx(TRUTH["load.mass"], rel=1e-2)
+    # the file's values (issue 17): the written plant, intervals at the normal quantile,
+    # and fit_after recomputed from an independent replay of the written estimated plant
+    # (simulate.open_loop, per sample) from the written initial state, by the NRMSE formula;
+    # the two integrators agree to ~1e-5 of full scale (test_replay_is_open_loop_simulation),
+    # which moves a fit by < 0.01 points: allow 0.05
+    from scipy.stats import norm
+    from workbench import simulate
+    assert saved["plant"] == str(plant_file)
+    for n, p in saved["parameters"].items():
+        assert p["ci95"] == pytest.approx([p["value"] - norm.ppf(0.975) * p["std"],
+                                           p["value"] + norm.ppf(0.975) * p["std"]], rel=1e-9)
+        assert est.params[n] == pytest.approx(p["value"], rel=1e-12)
+    x0 = np.array([saved["x0"][0][k] for k in est.state_names])
+    run = simulate.open_loop(est, noisy.t, noisy["u"], x0=x0, progress=False)
+    for s in ("x", "p_a", "p_b"):
+        assert saved["fit_after"][0][s] == pytest.approx(_nrmse(noisy[s], run[s]), abs=0.05), s
     # a bad parameter name is one readable line, exit code 2
     code = main(["identify", "greybox", str(plant_file), str(rec_file), "--params", "load.mas"])
     assert code == 2
@@ -347,3 +363,98 @@ def test_covariance_is_the_constrained_gauss_newton_one_written_out():
     assert ok
     assert std == pytest.approx(np.sqrt(np.diag(cov)) * np.array([2.0, 0.5]), rel=1e-8)
     assert corr[0, 1] == pytest.approx(cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1]), rel=1e-8)
+
+
+# ---------------------------------------------------------------- values of the JSON (issue 17)
+def _nrmse(y, ym):
+    """formats.md section 4, written out: 100 (1 - ||y - ym|| / ||y - mean(y)||)."""
+    y, ym = np.asarray(y, float), np.asarray(ym, float)
+    return 100.0 * (1.0 - np.linalg.norm(y - ym) / np.linalg.norm(y - y.mean()))
+
+
+def _white_fraction(e, lags=25):
+    """Share of lags 1..25 whose sample autocorrelation (mean removed, biased estimator
+    sum e_k e_{k+l} / sum e_k^2, Box & Jenkins) is outside +-2.58/sqrt(N) (99 % band)."""
+    e = np.asarray(e, float) - np.mean(e)
+    r = np.array([e[:len(e) - k] @ e[k:] for k in range(1, lags + 1)]) / (e @ e)
+    return float(np.mean(np.abs(r) > 2.58 / math.sqrt(len(e))))
+
+
+def test_json_values_recomputed_from_their_definitions(noisy_result, noisy):
+    """Every key of GreyBoxResult.to_dict() against a value computed here: the 95 %
+    interval from the normal quantile (scipy), the fits from the replays by the NRMSE
+    formula, residual RMS, whiteness and cost from the residuals, the method's counts
+    from the recording. Tolerances: 1e-9 relative for what is the same arithmetic
+    (only summation order differs), 0.01 percentage points for the fits."""
+    from scipy.stats import norm
+    res = noisy_result
+    d = json.loads(json.dumps(res.to_dict()))
+    assert list(d) == ["parameters", "correlation", "recordings", "fit_before", "fit_after",
+                       "fit_ms", "noise", "residual_rms", "residual_whiteness",
+                       "integration_error", "x0", "cost", "iterations", "status", "success",
+                       "wall_time_s", "poor_fit", "message", "method"]
+    z = norm.ppf(0.975)
+    units = {"load.mass": "kg", "load.viscous_friction": "N s/m",
+             "valve.sonic_conductance": "m^3/(s Pa)",
+             "leakage.conductance_to_atmosphere": "m^3/(s Pa)"}
+    for n, p in d["parameters"].items():
+        lo, hi = p["ci95"]
+        assert lo == pytest.approx(p["value"] - z * p["std"], rel=1e-9)
+        assert hi == pytest.approx(p["value"] + z * p["std"], rel=1e-9)
+        # the estimate is within 3 std of the truth (it is a 1 % estimate: see above)
+        assert abs(p["value"] - TRUTH[n]) < 3 * p["std"] < 0.03 * TRUTH[n]
+        assert p["nominal"] == START[n]
+        # default bounds x0.1 .. x10 of the start value (the CLI's --bounds help)
+        assert p["bounds"] == pytest.approx([0.1 * START[n], 10.0 * START[n]], rel=1e-12)
+        assert p["unit"] == units[n]
+        # identifiable: std below half the value (the docstring); not at a bound
+        assert p["identifiable"] is (p["std"] <= 0.5 * abs(p["value"]))
+        assert p["at_bound"] is False and p["bounds"][0] < p["value"] < p["bounds"][1]
+    assert d["parameters"]["load.mass"]["unit"] == "kg"
+    c = np.array(d["correlation"])
+    assert c.shape == (4, 4) and np.allclose(np.diag(c), 1.0) and np.allclose(c, c.T)
+    # fits before/after: the NRMSE of the recording against the CVODES replays
+    for key, runs in (("fit_before", res.trajectories_before),
+                      ("fit_after", res.trajectories_after)):
+        for s in ("x", "p_a", "p_b"):
+            assert d[key][0][s] == pytest.approx(_nrmse(noisy[s], runs[0][s]), abs=1e-2), (key, s)
+    r = res.residuals_[0]
+    nres = 0
+    cost = 0.0
+    for s in ("x", "p_a", "p_b"):
+        e = np.asarray(r[s])
+        assert len(e) == len(noisy.t)
+        # fit of the multiple-shooting trajectory y - e
+        assert d["fit_ms"][0][s] == pytest.approx(_nrmse(noisy[s], noisy[s] - e), abs=1e-2)
+        assert d["residual_rms"][0][s] == pytest.approx(math.sqrt(np.mean(e ** 2)), rel=1e-9)
+        assert d["residual_whiteness"][0][s] == pytest.approx(_white_fraction(e), abs=1e-12)
+        # noise from third differences: var(y[k+3] - 3y[k+2] + 3y[k+1] - y[k]) = 20 sd^2
+        # for white noise (1 + 9 + 9 + 1); the smooth signal adds ~x''' h^3, negligible
+        sd3 = np.std(np.diff(np.asarray(noisy[s]), 3)) / math.sqrt(20.0)
+        assert d["noise"][0][s] == pytest.approx(sd3, rel=0.05)
+        cost += float(np.sum((e / d["noise"][0][s]) ** 2))
+        nres += len(e)
+        # fixed-step model against CVODES on each shooting interval: far below the noise
+        assert 0.0 <= d["integration_error"][0][s] < 0.05 * NOISE[s]
+    # cost 0.5 sum((e / sd)^2) / n over the compared samples (the docstring); the
+    # multiple-shooting continuity gaps are zero at the solution, so the measured
+    # residuals are the whole sum (1 % covers a small initial-state prior if any)
+    assert d["cost"] == pytest.approx(0.5 * cost / nres, rel=1e-2)
+    x0 = d["x0"][0]
+    assert list(x0) == list(res.plant_.state_names)
+    assert abs(x0["x"] - noisy["x"][0]) < 5 * NOISE["x"]
+    assert abs(x0["p_a"] - noisy["p_a"][0]) < 5 * NOISE["p_a"]
+    assert 0 < d["iterations"] <= 50 and isinstance(d["iterations"], int)
+    assert d["status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level") \
+        or d["status"].startswith("Parameters_Converged")
+    assert d["success"] is True and d["poor_fit"] is False
+    assert 0.0 < d["wall_time_s"] < 120.0
+    assert "explains the recordings to the noise level" in d["message"]
+    m = d["method"]
+    assert m["samples"] == len(noisy.t) == 2001
+    # 0.05 s shooting interval (default) at 1 kHz: 50 samples; the 2001 samples fill
+    # ceil(2001 / 50) = 41 intervals (the last padded)
+    assert m["shooting_interval_samples"] == 50
+    assert m["shooting_intervals"] == math.ceil(2001 / 50) == 41
+    assert m["signals"] == ["x", "p_a", "p_b"] and m["replay"] == ["open_loop"]
+    assert m["x0"] == "estimate" and m["friction_form"] == "none"

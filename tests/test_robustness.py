@@ -14,6 +14,18 @@ from workbench.simulate import steps
 PLANT = "designs/plants/situm_rodless.toml"
 
 
+def _wilson(k: int, n: int, z: float | None = None) -> tuple[float, float]:
+    """Wilson score interval (Wilson 1927; Agresti & Coull 1998, eq. 2) written as
+    (k + z^2/2) / (n + z^2) +- z sqrt(k (n - k) / n + z^2 / 4) / (n + z^2), z the 97.5 %
+    normal quantile (scipy). The code uses z = 1.96, 4e-5 above it: its ends differ
+    from these by < 1e-4, the tolerance used with this."""
+    from scipy.stats import norm
+    z = norm.ppf(0.975) if z is None else z
+    mid = (k + z * z / 2) / (n + z * z)
+    half = z * np.sqrt(k * (n - k) / n + z * z / 4) / (n + z * z)
+    return max(0.0, mid - half), min(1.0, mid + half)
+
+
 def test_draws_are_seeded_and_within_ranges():
     plant = Plant.from_toml(PLANT)
     a = draw_plants(plant, 5, seed=7)
@@ -116,10 +128,16 @@ def test_a_design_that_cannot_be_built_fails_its_draw_instead_of_stopping_the_ru
     assert "no solution" in res.first_error["boom"]
 
 
-def test_cli_writes_csv_json_and_figure_and_refuses_bad_ranges(tmp_path, capsys):
+def test_cli_writes_csv_json_and_figure_and_refuses_bad_ranges(tmp_path, capsys, monkeypatch):
     import csv
     import json
+    import re
+    from workbench import robustness as rb
     from workbench.__main__ import main
+    seen = []
+    real_mc = rb.monte_carlo
+    monkeypatch.setattr(rb, "monte_carlo", lambda *a, **kw: seen.append(real_mc(*a, **kw))
+                        or seen[-1])
     rc = main(["robustness", PLANT, "--draws", "2", "--seed", "4", "--workers", "1",
                "--vary", "load.mass=0.8:1.2", "--out", str(tmp_path), "--json"])
     assert rc == 0
@@ -134,6 +152,35 @@ def test_cli_writes_csv_json_and_figure_and_refuses_bad_ranges(tmp_path, capsys)
         assert float(row["flow_factor"]) == 1.0                  # neither kappa nor C drawn
     lo, hi = printed["controllers"]["p"]["pass_interval"]
     assert 0.0 <= lo <= printed["controllers"]["p"]["pass_rate"] <= hi <= 1.0
+    # the values (issue 17): draws from the seed, the rate and its Wilson interval from
+    # the per-draw CSV, by the formulas written here
+    u = np.random.default_rng(4).random((2, 1))[:, 0]
+    assert [d["load.mass"] for d in printed["draws"]] == pytest.approx(0.91 * (0.8 + 0.4 * u),
+                                                                       rel=1e-15)
+    assert printed["seed"] == 4 and on_disk["uncertainty"] == [
+        {"key": "load.mass", "low": 0.8, "high": 1.2, "mode": "factor"}]
+    c = printed["controllers"]["p"]
+    k = sum(int(r["p_passed"]) for r in rows)
+    assert c["passed"] == [r["p_passed"] == "1" for r in rows]
+    assert c["pass_rate"] == on_disk["controllers"]["p"]["pass_rate"] == k / 2
+    assert c["pass_interval"] == pytest.approx(_wilson(k, 2), abs=1e-4)
+    assert c["scores"] == [float(r["p_score"]) for r in rows]
+    assert c["failed_checks"] == [r["p_failed"].split(";") if r["p_failed"] else []
+                                  for r in rows]
+    assert c["first_error"] is None
+    # the table printed without --json (same result, not simulated again): rate, interval,
+    # median and worst IAE (mm s) from the CSV scores
+    monkeypatch.setattr(rb, "monte_carlo", lambda *a, **kw: seen[0])
+    assert main(["robustness", PLANT, "--draws", "2", "--seed", "4", "--quiet",
+                 "--vary", "load.mass=0.8:1.2"]) == 0
+    text = capsys.readouterr().out
+    wl, wh = _wilson(k, 2)
+    assert f"pass rate {k / 2:.0%} (95 % interval {wl:.0%} .. {wh:.0%})" in text, text
+    med, worst = map(float, re.search(r"IAE median (\S+) mm s, worst (\S+) mm s", text).groups())
+    sc = [1e3 * float(r["p_score"]) for r in rows]
+    assert med == pytest.approx(float(np.median(sc)), rel=5e-3)   # printed to 3 digits
+    assert worst == pytest.approx(max(sc), rel=5e-3)
+    monkeypatch.setattr(rb, "monte_carlo", real_mc)
     for bad in (["--vary", "load.mass"], ["--vary", "load.mass=a:b"], ["--draws", "0"],
                 ["--vary", "no.such=1:2"]):
         assert main(["robustness", PLANT, *bad]) == 2
@@ -154,3 +201,51 @@ def test_figure_axes_follow_what_was_drawn():
                        uncertainty=(Uncertainty("supply.pressure", -1e5, 1e5, "offset"),))
     (x, xl), (y, yl) = _figure_axes(only, plant)
     assert xl == "supply.pressure / nominal" and not y.any()
+
+
+def test_result_values_recomputed_from_the_draws_and_the_csv():
+    """to_dict/to_csv_text/table values (issue 17) on a judge that needs no simulation:
+    each draw's values from the seed by each mode's formula, the pass rate as passes /
+    draws, the Wilson interval, median and worst score, all computed here from the CSV."""
+    import csv
+    import io
+    from workbench.robustness import Outcome
+    plant = Plant.from_toml(PLANT)
+    nom = {k: plant.params[k] for k in ("gas.polytropic_index", "valve.sonic_conductance",
+                                        "load.mass", "supply.pressure")}
+
+    def judge(p, controller):           # passes for the lighter half; score = mass / 10
+        m = p.params["load.mass"]
+        return Outcome(m < nom["load.mass"], () if m < nom["load.mass"] else ("heavy",), m / 10)
+
+    n, seed = 9, 11
+    res = monte_carlo(plant, {"c": lambda p: None}, n=n, seed=seed, judge=judge, workers=1)
+    u = np.random.default_rng(seed).random((n, 4))        # one uniform per key, in order
+    expect = np.column_stack([1.0 + 0.4 * u[:, 0],                          # value 1..1.4
+                              nom["valve.sonic_conductance"] * (0.7 + 0.6 * u[:, 1]),
+                              nom["load.mass"] * (0.5 + 1.5 * u[:, 2]),
+                              nom["supply.pressure"] + (-1e5 + 2e5 * u[:, 3])])
+    rows = list(csv.DictReader(io.StringIO(res.to_csv_text(plant))))
+    d = res.to_dict()
+    for i, (row, dr) in enumerate(zip(rows, d["draws"])):
+        for j, key in enumerate(nom):
+            assert float(row[key]) == dr[key] == pytest.approx(expect[i, j], rel=1e-14)
+        # flow factor kappa C / (kappa0 C0)
+        assert float(row["flow_factor"]) == pytest.approx(
+            expect[i, 0] * expect[i, 1] / (nom["gas.polytropic_index"]
+                                           * nom["valve.sonic_conductance"]), rel=1e-14)
+    k = sum(int(r["c_passed"]) for r in rows)
+    assert 0 < k < n, k                                       # a rate the checks can see
+    c = d["controllers"]["c"]
+    assert c["pass_rate"] == pytest.approx(k / n, rel=1e-15)
+    assert res.pass_interval("c") == pytest.approx(_wilson(k, n), abs=1e-4)
+    # the interval at z = 1.96 itself, to 1e-12
+    assert res.pass_interval("c") == pytest.approx(_wilson(k, n, 1.96), abs=1e-12)
+    sc = np.array([float(r["c_score"]) for r in rows])
+    assert c["scores"] == pytest.approx(list(sc), rel=1e-15)
+    np.testing.assert_allclose(sc, expect[:, 2] / 10, rtol=1e-14)
+    name, rate, runs, med, worst, check = res.table()[0]
+    assert (name, runs, check) == ("c", n, "heavy")
+    assert rate == pytest.approx(k / n, rel=1e-15)
+    assert med == pytest.approx(sorted(sc)[n // 2], rel=1e-15)      # n odd: middle one
+    assert worst == pytest.approx(max(sc), rel=1e-15)
