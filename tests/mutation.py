@@ -223,6 +223,22 @@ MUTATIONS: tuple[Mutation, ...] = (
        'pv["valve.critical_pressure_ratio"], T, port_ta,',
        'pv["valve.critical_pressure_ratio"], T, port_tb,',
        "plant wiring: valve sees chamber B's temperature at port A", PHYS_GREY),
+    # blind round 2 (p17mut2): further plausible physics bugs
+    _m("chamber-b-volume-x", "physics", "workbench/physics/chamber.py",
+       "dead_b + area_b * (stroke - x)", "dead_b + area_b * x",
+       "chamber B grows with x instead of shrinking", PHYS),
+    _m("inflow-for-rate-k", "physics", "workbench/physics/chamber.py",
+       "(volume * dp / k + p * volume_rate)", "(volume * dp * k + p * volume_rate)",
+       "inverse pressure law: V dp k instead of V dp / k", PHYS + INV),
+    _m("end-stop-high-damping-sign", "physics", "workbench/physics/piston.py",
+       "-k * (x - stroke) - c * v, 0.0)", "-k * (x - stroke) + c * v, 0.0)",
+       "upper end stop pushes with the velocity (negative damping)", PHYS),
+    _m("temperature-rate-volume-sign", "physics", "workbench/physics/chamber.py",
+       "dp / p + volume_rate / volume", "dp / p - volume_rate / volume",
+       "chamber temperature: expansion term with the wrong sign", PHYS),
+    _m("gas-mass-ideal-gas", "physics", "workbench/physics/chamber.py",
+       "return p * volume / (r * temperature)", "return p * volume * r / temperature",
+       "gas mass m = p V r / T instead of p V / (r T)", PHYS),
     # ------------------------------------------------------------------ diagnosis
     _m("dbic-penalty-sign", "diagnose", "workbench/diagnose/explain.py",
        "- r.k * math.log(n_eff)", "+ r.k * math.log(n_eff)",
@@ -372,6 +388,20 @@ MUTATIONS: tuple[Mutation, ...] = (
     _m("limits-delay-frequency", "control", "workbench/stability/limits.py",
        "sampled_delay_frequency=d_th / T)", "sampled_delay_frequency=d_th * T)",
        "sampled_delay_frequency = theta * T instead of theta / T", LIM),
+    # blind round 2 (p17mut2): further plausible gain-limit bugs
+    _m("limits-pct-half-sample", "control", "workbench/stability/limits.py",
+       "return T / 2.0 + 1.0 / w0", "return T + 1.0 / w0",
+       "PCT time constant with a full sample instead of T/2", LIM),
+    _m("limits-continuous-factor", "control", "workbench/stability/limits.py",
+       'return 2.0 * positive("zeta", zeta, "(damping ratio)") * positive',
+       'return positive("zeta", zeta, "(damping ratio)") * positive',
+       "continuous limit zeta w0 instead of 2 zeta w0", LIM),
+    _m("limits-zoh-plant-gain", "control", "workbench/stability/limits.py",
+       "B = np.array([[0.0], [0.0], [w0 ** 2]])", "B = np.array([[0.0], [0.0], [w0]])",
+       "exact ZOH model: input gain w0 instead of w0^2", LIM),
+    _m("limits-zoh-plant-damping", "control", "workbench/stability/limits.py",
+       "-2.0 * zeta * w0]])", "-zeta * w0]])",
+       "exact ZOH model: damping zeta w0 instead of 2 zeta w0", LIM),
     # ------------------------------------------------------------------ core (blind round 2)
     # Written from the library code alone (the tests were not read first); the test
     # files were found afterwards by grepping for the module's imports.
