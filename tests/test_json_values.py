@@ -1,0 +1,177 @@
+"""Values of the JSON outputs (issue 17): every key of ``check --json``, ``linearize --json``
+and ``simulate``'s fit.json against an independent computation written here.
+
+Sources: physics.md (ISO 6358 datasheet form, rho0 = 1.185 kg/m^3 at 293.15 K, 1 bar: the
+ANR convention of ``workbench.units``; paper 000 w0/zeta formulas), formats.md section 4
+(fit = 100 (1 - ||y - y_m|| / ||y - mean y||)); central differences of ``plant.evaluate_f``.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench import Plant
+from workbench.__main__ import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SITUM = ROOT / "designs" / "plants" / "situm_rodless.toml"
+RIG25 = ROOT / "designs" / "plants" / "rig25_mpye.toml"
+REC = ROOT / "tests" / "data" / "recordings" / "step_small.csv"
+RHO_ANR = 1.185          # kg/m^3 at 20 degC, 1 bar (physics.md, ISO 6358 datasheet form)
+
+
+def _read_csv(path):
+    """Columns of a formats.md CSV by name, skipping '#' lines (plain Python, no workbench)."""
+    lines = [ln for ln in Path(path).read_text().splitlines() if ln and not ln.startswith("#")]
+    names = lines[0].split(",")
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    return {n: rows[:, i] for i, n in enumerate(names)}
+
+
+def _run_json(capsys, argv):
+    capsys.readouterr()
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.mark.parametrize("path, kind", [(SITUM, "p"), (RIG25, "pd")], ids=["situm", "rig25"])
+def test_check_json_values(capsys, path, kind):
+    """Every key of ``check --json`` by hand from the TOML (read with tomllib, not the plant)."""
+    import tomllib
+    toml = tomllib.loads(path.read_text())
+    cyl, gas = toml["cylinder"], toml.get("gas", {})
+    bore, stroke = cyl["bore"], cyl["stroke"]
+    rod = cyl.get("rod_diameter", 0.0)
+    p_s, p_atm = toml["supply"]["pressure"], gas.get("atmospheric_pressure", 101325.0)
+    temp = gas.get("temperature", 293.15)
+    d = _run_json(capsys, ["check", str(path), "--json"])
+    a_a = math.pi / 4 * bore ** 2
+    a_b = math.pi / 4 * (bore ** 2 - rod ** 2)
+    # 1e-12 relative: the same closed forms, only rounding differs
+    assert d["area_a_m2"] == pytest.approx(a_a, rel=1e-12)
+    assert d["area_b_m2"] == pytest.approx(a_b, rel=1e-12)
+    assert d["stroke_m"] == pytest.approx(stroke, rel=1e-12)
+    assert d["volume_a_max_m3"] == pytest.approx(a_a * stroke + cyl["dead_volume_a"], rel=1e-12)
+    assert d["volume_b_max_m3"] == pytest.approx(a_b * stroke + cyl["dead_volume_b"], rel=1e-12)
+    assert d["max_force_extend_N"] == pytest.approx((p_s - p_atm) * a_a, rel=1e-12)
+    assert d["max_force_retract_N"] == pytest.approx((p_s - p_atm) * a_b, rel=1e-12)
+    # ISO 6358, choked at full opening (p_atm / p_s < b): q = C p_s rho0 sqrt(T0 / T)
+    valve = toml["valve"]
+    assert p_atm / p_s < valve["critical_pressure_ratio"]
+    q = valve["sonic_conductance"] * p_s * RHO_ANR * math.sqrt(293.15 / temp)
+    assert d["valve_flow_full_opening_kg_s"] == pytest.approx(q, rel=1e-12)
+    # l/min ANR: volume at rho0 = 1.185 kg/m^3, 1000 l/m^3, 60 s/min
+    assert d["valve_flow_full_opening_l_min_anr"] == pytest.approx(q / RHO_ANR * 1e3 * 60, rel=1e-12)
+    assert d["valve_law"] == "iso6358"
+    assert d["effects"] == []
+    assert d["states"] == ["x", "v", "p_a", "p_b"]
+    # parameters of a plant without effects, counted by hand (formats.md): gas 3 (T, k,
+    # p_atm), supply 1, valve 4 (C, b, command centre and span; min/max are limits, not
+    # parameters), cylinder 5, load 3 (mass, k_f, external force, default 0)
+    assert d["parameters"] == 3 + 1 + 4 + 5 + 3
+    assert d["controller"] == toml["controller"] and d["controller"]["kind"] == kind
+    assert d["name"] == toml["name"]
+
+
+@pytest.fixture(scope="module")
+def lin_situm():
+    """``linearize SITUM --x 0.25 --json`` once for the module (0.8 s)."""
+    import contextlib
+    import io
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["linearize", str(SITUM), "--x", "0.25", "--json"]) == 0
+    return json.loads(buf.getvalue())
+
+
+def test_linearize_equilibrium_and_matrices(lin_situm):
+    """Equilibrium solves f = 0; A, B by central differences of f; C, D of h; eigenvalues."""
+    d = lin_situm
+    plant = Plant.from_toml(SITUM)
+    eq = d["equilibrium"]
+    x_e = np.array([eq["state"][n] for n in d["states"]])
+    u_e = eq["u"]
+    assert eq["x"] == x_e[0] == 0.25 and x_e[1] == 0.0
+    assert eq["p_a"] == x_e[2] and eq["p_b"] == x_e[3]
+    # force balance of a symmetric rodless cylinder at rest: p_a A = p_b A
+    assert eq["p_a"] == pytest.approx(eq["p_b"], rel=1e-9)
+    f_e = plant.evaluate_f(x_e, u_e)
+    # scaled residual ~ machine precision; the reported one is that small too
+    assert np.max(np.abs(f_e / plant.state_scales())) < 1e-9
+    assert 0.0 <= eq["residual"] < 1e-9
+    # central differences: relative steps 1e-6 of each state's scale, error O(h^2) ~ 1e-10
+    sc = plant.state_scales()
+    a_fd = np.zeros((4, 4))
+    for j in range(4):
+        h = 1e-6 * sc[j]
+        e = np.zeros(4)
+        e[j] = h
+        a_fd[:, j] = (plant.evaluate_f(x_e + e, u_e) - plant.evaluate_f(x_e - e, u_e)) / (2 * h)
+    hu = 1e-6 * 10.0
+    b_fd = (plant.evaluate_f(x_e, u_e + hu) - plant.evaluate_f(x_e, u_e - hu)) / (2 * hu)
+    a, b = np.array(d["A"]), np.array(d["B"])[:, 0]
+    # tolerance: 1e-6 of each row's largest entry (FD truncation + rounding ~1e-8)
+    for i in range(4):
+        tol = 1e-6 * max(np.max(np.abs(a_fd[i])), np.abs(b_fd[i]), 1e-12)
+        np.testing.assert_allclose(a[i], a_fd[i], atol=tol, rtol=0)
+        np.testing.assert_allclose(b[i], b_fd[i], atol=tol, rtol=0)
+    c_fd = np.zeros((7, 4))
+    for j in range(4):
+        h = 1e-6 * sc[j]
+        e = np.zeros(4)
+        e[j] = h
+        c_fd[:, j] = (plant.evaluate_h(x_e + e, u_e) - plant.evaluate_h(x_e - e, u_e)) / (2 * h)
+    d_fd = (plant.evaluate_h(x_e, u_e + hu) - plant.evaluate_h(x_e, u_e - hu)) / (2 * hu)
+    c, dd = np.array(d["C"]), np.array(d["D"])[:, 0]
+    for i in range(7):
+        tol = 1e-6 * max(np.max(np.abs(c_fd[i])), np.abs(d_fd[i]), 1e-12)
+        np.testing.assert_allclose(c[i], c_fd[i], atol=tol, rtol=0)
+        np.testing.assert_allclose(dd[i], d_fd[i], atol=tol, rtol=0)
+    # eigenvalues of the FD matrix (numpy), matched as sorted sets; 1e-5 rad/s absolute
+    ev = np.sort_complex(np.array([complex(e["re"], e["im"]) for e in d["eigenvalues"]]))
+    np.testing.assert_allclose(ev, np.sort_complex(np.linalg.eigvals(a_fd)), atol=1e-4)
+
+
+def test_linearize_reduced_model_paper_formulas(lin_situm):
+    """Kv, w0, zeta by the paper 000 formulas (physics.md) at the equilibrium pressure."""
+    import tomllib
+    toml = tomllib.loads(SITUM.read_text())
+    d = lin_situm
+    p = d["equilibrium"]["p_a"]
+    area = math.pi / 4 * toml["cylinder"]["bore"] ** 2
+    kappa, m, kf = toml["gas"]["polytropic_index"], toml["load"]["mass"], toml["load"]["viscous_friction"]
+    # Vc = both chambers at x = 0.25 (the paper's A L with the dead volumes)
+    vc = 2 * (area * 0.25 + toml["cylinder"]["dead_volume_a"])
+    w0 = math.sqrt(4 * kappa * p * area ** 2 / (m * vc))
+    zeta = kf / 2 * math.sqrt(vc / (4 * kappa * p * area ** 2 * m))
+    red = d["reduced_model"]
+    # exact reduction of a symmetric plant at mid stroke: only rounding differs
+    assert red["w0"] == pytest.approx(w0, rel=1e-9)
+    assert red["zeta"] == pytest.approx(zeta, rel=1e-9)
+    # Kv: steady velocity per volt, from p_a' = 0 (B_pa u = -A_pa,v v), FD-checked above
+    a, b = np.array(d["A"]), np.array(d["B"])
+    assert red["Kv"] == pytest.approx(b[2, 0] / -a[2, 1], rel=1e-9)
+    assert red["Kv"] == pytest.approx(0.70, abs=0.005)     # Table II, the TOML comment's design
+    assert 0 <= red["fit_error"] < 1e-9
+    lo, hi = red["band_rad_s"]
+    assert lo < w0 < hi
+    assert d["notes"] == []
+
+
+def test_simulate_fit_json_is_nrmse(tmp_path):
+    """fit.json = 100 (1 - ||y - y_m|| / ||y - mean y||) (formats.md 4), from the CSVs."""
+    out = tmp_path / "sim"
+    assert main(["simulate", str(SITUM), str(REC), "--out", str(out), "--quiet"]) == 0
+    fits = json.loads((out / "fit.json").read_text())
+    rec, sim = _read_csv(REC), _read_csv(out / "simulation.csv")
+    assert set(fits) == {"x", "p_a", "p_b"}
+    np.testing.assert_allclose(sim["t"], rec["t"], atol=1e-9)
+    for k, v in fits.items():
+        y, ym = rec[k], sim[k]
+        ref = 100 * (1 - np.linalg.norm(y - ym) / np.linalg.norm(y - y.mean()))
+        # 1e-6 %: the CSV rounds the simulated signals to its printed digits
+        assert v == pytest.approx(ref, abs=1e-4)
