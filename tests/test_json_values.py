@@ -175,3 +175,54 @@ def test_simulate_fit_json_is_nrmse(tmp_path):
         ref = 100 * (1 - np.linalg.norm(y - ym) / np.linalg.norm(y - y.mean()))
         # 1e-6 %: the CSV rounds the simulated signals to its printed digits
         assert v == pytest.approx(ref, abs=1e-4)
+
+
+def _fd_tangent(plant, x_e, u_e):
+    """A, B of ``plant.evaluate_f`` by central differences (steps 1e-6 of each scale)."""
+    sc = plant.state_scales()
+    a = np.zeros((len(x_e), len(x_e)))
+    for j in range(len(x_e)):
+        e = np.zeros(len(x_e))
+        e[j] = 1e-6 * sc[j]
+        a[:, j] = (plant.evaluate_f(x_e + e, u_e) - plant.evaluate_f(x_e - e, u_e)) / (2 * e[j])
+    b = (plant.evaluate_f(x_e, u_e + 1e-5) - plant.evaluate_f(x_e, u_e - 1e-5)) / 2e-5
+    return a, b[:, None]
+
+
+def test_map_json_rho_against_python_control(tmp_path, capsys):
+    """map.json axes, rho[y][x] at every point = max |z| of python-control's c2d (ZOH) of the
+    FD tangent x/u, minimal realisation, closed by the discrete P law u = kp (r - x)."""
+    import control
+    from scipy import signal
+    from workbench.equilibrium import operating_point
+    out = tmp_path / "map"
+    d = _run_json(capsys, ["map", str(SITUM), "--x-axis", "kp=5:20:3", "--y-axis",
+                           "load.mass=0.5:1.5:2", "--out", str(out), "--json", "--no-plot",
+                           "--workers", "1", "--quiet"])
+    m = json.loads((out / "map.json").read_text())
+    assert m["x"]["name"] == "kp" and m["y"]["name"] == "load.mass"
+    np.testing.assert_allclose(m["x"]["values"], [5.0, 12.5, 20.0], rtol=1e-12)
+    np.testing.assert_allclose(m["y"]["values"], [0.5, 1.5], rtol=1e-12)
+    assert m["position_m"] == 0.25 and m["controller"]["sample_time"] == 0.01
+    assert d["stable_fraction"] == m["stable_fraction"]
+    rho = np.array(m["rho"])
+    assert rho.shape == (2, 3)                  # rows: y (mass), columns: x (kp)
+    base = Plant.from_toml(SITUM)
+    for iy, mass in enumerate(m["y"]["values"]):
+        plant = base.with_params(**{"load.mass": mass})
+        op = operating_point(plant, 0.25)
+        a, b = _fd_tangent(plant, np.asarray(op.state, float), op.u)
+        num, den = signal.ss2tf(a, b, np.array([[1.0, 0, 0, 0]]), np.zeros((1, 1)))
+        # the pressure-sum mode (s = 0) cancels: minimal x/u of order 3 (no slycot needed)
+        g = control.tf(num[0], den).minreal(tol=1e-6)
+        assert len(g.den[0][0]) == 4
+        gz = control.c2d(g, 0.01, method="zoh")
+        for ix, kp in enumerate(m["x"]["values"]):
+            cl = control.feedback(kp * gz, 1)
+            ref = np.max(np.abs(control.poles(cl)))
+            # 1e-5: FD Jacobian (~1e-8 relative) through the closed-loop pole map
+            assert rho[iy, ix] == pytest.approx(ref, abs=1e-5), (mass, kp)
+    stable = (rho < 1).mean()
+    assert m["stable_fraction"] == pytest.approx(stable)
+    # the one hidden mode (pressure sum, |z| = 1 for a leak-free closed centre) is named
+    assert any("hidden" in n for n in m["notes"])
