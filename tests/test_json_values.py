@@ -38,10 +38,21 @@ def _run_json(capsys, argv):
     return json.loads(capsys.readouterr().out)
 
 
-@pytest.mark.parametrize("path, kind", [(SITUM, "p"), (RIG25, "pd")], ids=["situm", "rig25"])
-def test_check_json_values(capsys, path, kind):
-    """Every key of ``check --json`` by hand from the TOML (read with tomllib, not the plant)."""
+@pytest.mark.parametrize("path, kind", [(SITUM, "p"), (RIG25, "pd"), ("rod", "p")],
+                         ids=["situm", "rig25", "situm_with_rod"])
+def test_check_json_values(capsys, tmp_path, path, kind):
+    """Every key of ``check --json`` by hand from the TOML (read with tomllib, not the plant).
+
+    Both shipped plants are rodless (A_a = A_b, equal dead volumes), so a third case gives
+    the Situm rig an 8 mm rod and unequal dead volumes: an A/B mix-up must show.
+    """
     import tomllib
+    if path == "rod":
+        path = tmp_path / "rod.toml"
+        path.write_text(SITUM.read_text()
+                        .replace("rod_diameter = 0.0 ", "rod_diameter = 0.008 ")
+                        .replace("dead_volume_b = 2.0e-6", "dead_volume_b = 3.5e-6"))
+        assert "0.008" in path.read_text() and "3.5e-6" in path.read_text()
     toml = tomllib.loads(path.read_text())
     cyl, gas = toml["cylinder"], toml.get("gas", {})
     bore, stroke = cyl["bore"], cyl["stroke"]
