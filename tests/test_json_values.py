@@ -107,6 +107,9 @@ def test_linearize_equilibrium_and_matrices(lin_situm):
     x_e = np.array([eq["state"][n] for n in d["states"]])
     u_e = eq["u"]
     assert eq["x"] == x_e[0] == 0.25 and x_e[1] == 0.0
+    assert d["plant"] == str(SITUM) and d["inputs"] == ["u"]
+    assert d["states"] == ["x", "v", "p_a", "p_b"]
+    assert d["outputs"] == ["x", "v", "p_a", "p_b", "p_s", "q_supply", "force"]
     assert eq["p_a"] == x_e[2] and eq["p_b"] == x_e[3]
     # force balance of a symmetric rodless cylinder at rest: p_a A = p_b A
     assert eq["p_a"] == pytest.approx(eq["p_b"], rel=1e-9)
@@ -216,6 +219,11 @@ def test_map_json_rho_against_python_control(tmp_path, capsys):
     np.testing.assert_allclose(m["y"]["values"], [0.5, 1.5], rtol=1e-12)
     assert m["position_m"] == 0.25 and m["controller"]["sample_time"] == 0.01
     assert d["stable_fraction"] == m["stable_fraction"]
+    assert m["fallbacks"] == d["fallbacks"] == 0          # no point needed the slow path
+    # throughput: the 6 points over the reported wall time (rounding only)
+    assert m["points_per_s"] == pytest.approx(6 / m["elapsed_s"], rel=1e-9)
+    assert {Path(v).name for v in d["files"].values()} == {"map.csv", "map.json", "map.png"}
+    assert (out / "map.csv").exists() and Path(d["files"]["json"]) == out / "map.json"
     rho = np.array(m["rho"])
     assert rho.shape == (2, 3)                  # rows: y (mass), columns: x (kp)
     base = Plant.from_toml(SITUM)
@@ -237,3 +245,35 @@ def test_map_json_rho_against_python_control(tmp_path, capsys):
     assert m["stable_fraction"] == pytest.approx(stable)
     # the one hidden mode (pressure sum, |z| = 1 for a leak-free closed centre) is named
     assert any("hidden" in n for n in m["notes"])
+
+
+def test_map_json_pid_against_python_control(tmp_path, capsys):
+    """A PID map (kd axis, fixed kp, ki, 1 sample of delay): rho against python-control with
+    the discrete law of ``controllers.pd.pid_law`` written out as a transfer function,
+    C(z) = kp + kd (z - 1) / (T z) + ki T z / (z - 1), and the delay 1/z."""
+    import control
+    from scipy import signal
+    from workbench.equilibrium import operating_point
+    out = tmp_path / "pidmap"
+    kp, ki, t_s = 8.0, 4.0, 0.01
+    _run_json(capsys, ["map", str(SITUM), "--x-axis", "kd=0:0.08:3", "--y-axis",
+                       "position=0.15:0.35:2", "--kp", str(kp), "--ki", str(ki), "--delay", "1",
+                       "--out", str(out), "--json", "--no-plot", "--workers", "1", "--quiet"])
+    m = json.loads((out / "map.json").read_text())
+    assert m["x"]["name"] == "kd" and m["y"]["name"] == "position"
+    assert m["delay_samples"] == 1
+    assert m["controller"]["kp"] == kp and m["controller"]["ki"] == ki
+    rho = np.array(m["rho"])
+    plant = Plant.from_toml(SITUM)
+    z = control.tf([1, 0], [1], t_s)
+    for iy, pos in enumerate(m["y"]["values"]):
+        op = operating_point(plant, pos)
+        a, b = _fd_tangent(plant, np.asarray(op.state, float), op.u)
+        num, den = signal.ss2tf(a, b, np.array([[1.0, 0, 0, 0]]), np.zeros((1, 1)))
+        gz = control.c2d(control.tf(num[0], den).minreal(tol=1e-6), t_s, method="zoh")
+        for ix, kd in enumerate(m["x"]["values"]):
+            c = kp + kd * (z - 1) / (t_s * z) + ki * t_s * z / (z - 1)
+            cl = control.feedback(c * gz / z, 1)
+            ref = np.max(np.abs(control.poles(cl)))
+            # 1e-5: FD Jacobian through the pole map (the integrator pole is not cancelled)
+            assert rho[iy, ix] == pytest.approx(ref, abs=1e-5), (pos, kd)
