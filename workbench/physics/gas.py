@@ -33,11 +33,6 @@ NOZZLE_CRITICAL_RATIO = (2.0 / (GAMMA + 1.0)) ** (GAMMA / (GAMMA - 1.0))  #: 0.5
 LAMINAR_MARGIN = 0.005
 
 
-#: Aliases kept for callers of the former helpers; use :mod:`workbench.physics.ops`.
-is_symbolic = ops.is_symbolic
-where = ops.where
-
-
 def smooth_sqrt(y, margin: float = LAMINAR_MARGIN):
     """sqrt(y) for y >= margin, C1 quadratic y (3 m - y) / (2 m^1.5) below.
 
