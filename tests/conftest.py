@@ -122,3 +122,30 @@ def make_plant(make_plant_file) -> Callable[..., Any]:
         return Plant.from_toml(make_plant_file(effects, overrides), friction=friction)
 
     return make
+
+
+def run_design(name: str, out: Path, *args: str) -> tuple[int, dict | None]:
+    """Run ``designs/<name>.py``'s ``main(["--quick", *args, "--out", out])`` in-process.
+
+    Returns its exit code and its ``summary.json`` (None when it wrote none).
+    """
+    import json
+    import runpy
+    root = Path(__file__).resolve().parents[1]
+    mod = runpy.run_path(str(root / "designs" / f"{name}.py"), run_name="design")
+    rc = mod["main"](["--quick", *args, "--out", str(out)])
+    summary = out / "summary.json"
+    return rc, (json.loads(summary.read_text()) if summary.exists() else None)
+
+
+def central_jacobian(fun, x, u: float, x_scales, u_step: float):
+    """Central differences of ``fun(x, u)`` (a vector) in x and u: steps of 1e-6 of each
+    state's scale and ``u_step`` in u, truncation error O(h^2) ~ 1e-10 relative."""
+    import numpy as np
+    x = np.asarray(x, dtype=float)
+    cols = []
+    for j in range(x.size):
+        e = np.zeros(x.size)
+        e[j] = 1e-6 * x_scales[j]
+        cols.append((fun(x + e, u) - fun(x - e, u)) / (2 * e[j]))
+    return np.column_stack(cols), (fun(x, u + u_step) - fun(x, u - u_step)) / (2 * u_step)

@@ -12,23 +12,22 @@ from __future__ import annotations
 
 import csv
 import json
-import runpy
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import run_design
+
 CONTROLLERS = ("PD", "FL", "NMPC")
 
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("nonlinear_comparison")
-    mod = runpy.run_path(str(ROOT / "designs" / "nonlinear_comparison.py"), run_name="design")
-    rc = mod["main"](["--quick", "--no-jit", "--workers", "2", "--out", str(out)])
-    return rc, out, json.loads((out / "summary.json").read_text())
+    rc, summary = run_design("nonlinear_comparison", out, "--no-jit", "--workers", "2")
+    return rc, out, summary
 
 
 def _trapezoid(y: np.ndarray, t: np.ndarray) -> float:

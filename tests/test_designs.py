@@ -16,14 +16,15 @@ import pandas as pd
 import pytest
 from scipy import optimize, signal
 
+from conftest import run_design
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def situm_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("situm_p_pd")
-    mod = runpy.run_path(str(ROOT / "designs" / "situm_p_pd.py"), run_name="design")
-    rc = mod["main"](["--quick", "--out", str(out)])
+    rc, _ = run_design("situm_p_pd", out)
     return rc, out
 
 
@@ -100,9 +101,8 @@ def _iso6358_psi(x: float, b: float) -> float:
 @pytest.fixture(scope="module")
 def rodless_sim(tmp_path_factory):
     out = tmp_path_factory.mktemp("situm_rodless_sim")
-    mod = runpy.run_path(str(ROOT / "designs" / "situm_rodless_sim.py"), run_name="design")
-    rc = mod["main"](["--quick", "--out", str(out)])
-    return rc, out, json.loads((out / "summary.json").read_text())
+    rc, summary = run_design("situm_rodless_sim", out)
+    return rc, out, summary
 
 
 def test_rodless_sim_linear_numbers_against_hand_formulas(rodless_sim):
@@ -186,9 +186,8 @@ CONCEALED_QUICK = {"dry_friction": "dry_friction", "mass_error": "parameter_erro
 @pytest.fixture(scope="module")
 def concealed(tmp_path_factory):
     out = tmp_path_factory.mktemp("diagnose_concealed")
-    mod = runpy.run_path(str(ROOT / "designs" / "diagnose_concealed.py"), run_name="design")
-    rc = mod["main"](["--quick", "--out", str(out)])
-    return rc, out, json.loads((out / "summary.json").read_text())
+    rc, summary = run_design("diagnose_concealed", out)
+    return rc, out, summary
 
 
 def test_concealed_quick_names_each_effect_and_nothing_else(concealed):

@@ -17,6 +17,8 @@ import pytest
 from workbench import Plant
 from workbench.__main__ import main
 
+from conftest import central_jacobian
+
 ROOT = Path(__file__).resolve().parents[1]
 SITUM = ROOT / "designs" / "plants" / "situm_rodless.toml"
 RIG25 = ROOT / "designs" / "plants" / "rig25_mpye.toml"
@@ -119,27 +121,15 @@ def test_linearize_equilibrium_and_matrices(lin_json):
     assert 0.0 <= eq["residual"] < 1e-9
     # central differences: relative steps 1e-6 of each state's scale, error O(h^2) ~ 1e-10
     sc = plant.state_scales()
-    a_fd = np.zeros((4, 4))
-    for j in range(4):
-        h = 1e-6 * sc[j]
-        e = np.zeros(4)
-        e[j] = h
-        a_fd[:, j] = (plant.evaluate_f(x_e + e, u_e) - plant.evaluate_f(x_e - e, u_e)) / (2 * h)
     hu = 1e-6 * 10.0
-    b_fd = (plant.evaluate_f(x_e, u_e + hu) - plant.evaluate_f(x_e, u_e - hu)) / (2 * hu)
+    a_fd, b_fd = central_jacobian(plant.evaluate_f, x_e, u_e, sc, hu)
     a, b = np.array(d["A"]), np.array(d["B"])[:, 0]
     # tolerance: 1e-6 of each row's largest entry (FD truncation + rounding ~1e-8)
     for i in range(4):
         tol = 1e-6 * max(np.max(np.abs(a_fd[i])), np.abs(b_fd[i]), 1e-12)
         np.testing.assert_allclose(a[i], a_fd[i], atol=tol, rtol=0)
         np.testing.assert_allclose(b[i], b_fd[i], atol=tol, rtol=0)
-    c_fd = np.zeros((7, 4))
-    for j in range(4):
-        h = 1e-6 * sc[j]
-        e = np.zeros(4)
-        e[j] = h
-        c_fd[:, j] = (plant.evaluate_h(x_e + e, u_e) - plant.evaluate_h(x_e - e, u_e)) / (2 * h)
-    d_fd = (plant.evaluate_h(x_e, u_e + hu) - plant.evaluate_h(x_e, u_e - hu)) / (2 * hu)
+    c_fd, d_fd = central_jacobian(plant.evaluate_h, x_e, u_e, sc, hu)
     c, dd = np.array(d["C"]), np.array(d["D"])[:, 0]
     for i in range(7):
         tol = 1e-6 * max(np.max(np.abs(c_fd[i])), np.abs(d_fd[i]), 1e-12)

@@ -15,7 +15,7 @@ from workbench.params import PlantParams
 from workbench.physics import gas, valve
 
 from conftest import DATA, EFFECT_KEYS, PLANTS, SPEC_EFFECTS, plant_dict, write_plant
-from conftest import state_scales
+from conftest import central_jacobian, state_scales
 
 BASIC_STATES = (("x", "m"), ("v", "m/s"), ("p_a", "Pa"), ("p_b", "Pa"))
 
@@ -437,14 +437,7 @@ def test_affine_plant_jacobian_matches_central_differences():
     jac = ca.Function("j", [xs, us], [ca.jacobian(fx, xs), ca.jacobian(fx, us)])
     jx, ju = (np.asarray(m) for m in jac(x0, u0))
     scales = state_scales(plant)
-    fd = np.zeros((4, 4))
-    for i in range(4):
-        h = 1e-6 * scales[i]
-        e = np.zeros(4)
-        e[i] = h
-        fd[:, i] = (plant.evaluate_f(x0 + e, u0) - plant.evaluate_f(x0 - e, u0)) / (2 * h)
-    hu = 1e-6 * 5.0
-    fdu = (plant.evaluate_f(x0, u0 + hu) - plant.evaluate_f(x0, u0 - hu)) / (2 * hu)
+    fd, fdu = central_jacobian(plant.evaluate_f, x0, u0, scales, 1e-6 * 5.0)
     # Compare each column relative to its largest entry (entries that are exactly
     # zero, e.g. dx'/dp_a, are zero in both).
     for i in range(4):
