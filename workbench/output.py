@@ -1,0 +1,180 @@
+"""Result sets written whole or not at all, inputs never overwritten, SIGTERM as a stop.
+
+Every command that writes more than one file writes them through :func:`result_set`:
+the files are made in a hidden staging folder beside the output folder and moved into
+place only when the whole computation has succeeded. A failure, Ctrl-C or SIGTERM
+leaves the output folder exactly as it was (no new file, no half-written file).
+
+>>> import tempfile, pathlib
+>>> out = pathlib.Path(tempfile.mkdtemp()) / "run"
+>>> with result_set(out) as stage:
+...     _ = (stage / "a.txt").write_text("1")
+...     _ = (stage / "b.txt").write_text("2")
+>>> sorted(p.name for p in out.iterdir())
+['a.txt', 'b.txt']
+>>> try:
+...     with result_set(out) as stage:
+...         _ = (stage / "a.txt").write_text("changed")
+...         raise RuntimeError("the computation failed")
+... except RuntimeError:
+...     pass
+>>> (out / "a.txt").read_text()
+'1'
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import tempfile
+from pathlib import Path
+from typing import Iterable, Iterator
+
+from .errors import InputError
+
+__all__ = ["result_set", "check_output_dir", "check_not_input", "Terminated",
+           "sigterm_as_exception", "EXIT_INTERRUPTED", "EXIT_TERMINATED"]
+
+#: Exit status after Ctrl-C (128 + SIGINT).
+EXIT_INTERRUPTED = 130
+#: Exit status after SIGTERM (128 + SIGTERM).
+EXIT_TERMINATED = 143
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived. A ``BaseException`` like ``KeyboardInterrupt``, so that no
+    ``except Exception`` on the way can mistake it for a failed computation."""
+
+
+def check_output_dir(out: str | os.PathLike, *, option: str = "--out") -> Path:
+    """Validate an output folder *before* any computation; return it as a Path.
+
+    Refused: an empty name, an existing non-folder, a path under an existing file, a
+    folder (or its nearest existing parent) that is not writable.
+
+    Raises
+    ------
+    InputError
+        Naming the option and the reason.
+    """
+    text = os.fspath(out)
+    if not str(text).strip():
+        raise InputError(f"{option} must name a folder, got an empty string")
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option} {text} exists and is not a folder")
+    parent = path
+    while not parent.exists():
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{option} {text} lies under {parent}, which is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"{option} {text}: cannot write in {parent} (permission denied)")
+    return path
+
+
+def check_not_input(outputs: Iterable[str | os.PathLike],
+                    inputs: Iterable[str | os.PathLike | None]) -> None:
+    """Refuse to write any of ``outputs`` over one of ``inputs`` (paths compared resolved).
+
+    Raises
+    ------
+    InputError
+        Naming the file that would be overwritten.
+    """
+    ins = {}
+    for p in inputs:
+        if p is None:
+            continue
+        try:
+            ins[Path(p).resolve()] = p
+        except OSError:
+            continue
+    for o in outputs:
+        try:
+            r = Path(o).resolve()
+        except OSError:
+            continue
+        if r in ins:
+            raise InputError(f"the output {o} would overwrite the input {ins[r]}; choose "
+                             f"another --out folder")
+
+
+@contextlib.contextmanager
+def result_set(out: str | os.PathLike, *,
+               inputs: Iterable[str | os.PathLike | None] = ()) -> Iterator[Path]:
+    """Stage a set of output files and move them into ``out`` only on success.
+
+    Parameters
+    ----------
+    out : path-like
+        The output folder (created on success if missing; existing files of the same
+        names are replaced, other files in it are left alone).
+    inputs : iterable of path-like
+        Files the command read: writing a staged file over one of them is refused
+        (:class:`~workbench.errors.InputError`), before anything is moved.
+
+    Yields
+    ------
+    pathlib.Path
+        The staging folder: write every result file there (sub-folders allowed).
+
+    Notes
+    -----
+    The staging folder is a hidden sibling of ``out`` on the same file system, so the
+    final moves are renames. If ``out`` does not exist, the whole staging folder is
+    renamed into place in one step; otherwise each file is renamed over its old
+    version. On any exception (including ``KeyboardInterrupt`` and :class:`Terminated`)
+    the staging folder is removed and ``out`` is untouched.
+    """
+    out = check_output_dir(out)
+    out_abs = out.resolve()
+    parent = out_abs.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out_abs.name}.partial-", dir=parent))
+    try:
+        yield stage
+        files = [p for p in stage.rglob("*") if p.is_file()]
+        check_not_input([out_abs / p.relative_to(stage) for p in files], inputs)
+        if not out_abs.exists():
+            os.chmod(stage, 0o777 & ~_umask())
+            os.rename(stage, out_abs)
+            return
+        for p in sorted(files):
+            target = out_abs / p.relative_to(stage)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(p, target)
+    finally:
+        if stage.exists():
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def sigterm_as_exception() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` in the main thread.
+
+    Used by the CLI around a command, so that a terminated run unwinds like Ctrl-C
+    (staged output removed) and exits with :data:`EXIT_TERMINATED`.
+    """
+    def _raise(signum, frame):  # noqa: ARG001 - signal handler signature
+        raise Terminated()
+    try:
+        old = signal.signal(signal.SIGTERM, _raise)
+    except ValueError:          # not the main thread: leave the default handler
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
