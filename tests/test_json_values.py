@@ -17,7 +17,7 @@ import pytest
 from workbench import Plant
 from workbench.__main__ import main
 
-from conftest import central_jacobian
+from conftest import central_jacobian, write_plant
 
 ROOT = Path(__file__).resolve().parents[1]
 SITUM = ROOT / "designs" / "plants" / "situm_rodless.toml"
@@ -201,9 +201,12 @@ def test_map_json_rho_against_python_control(tmp_path, capsys):
     from scipy import signal
     from workbench.equilibrium import operating_point
     out = tmp_path / "map"
+    import time
+    t0 = time.perf_counter()
     d = _run_json(capsys, ["map", str(SITUM), "--x-axis", "kp=5:20:3", "--y-axis",
                            "load.mass=0.5:1.5:2", "--out", str(out), "--json", "--no-plot",
                            "--workers", "1", "--quiet"])
+    d_wall = time.perf_counter() - t0
     m = json.loads((out / "map.json").read_text())
     assert m["x"]["name"] == "kp" and m["y"]["name"] == "load.mass"
     np.testing.assert_allclose(m["x"]["values"], [5.0, 12.5, 20.0], rtol=1e-12)
@@ -213,6 +216,8 @@ def test_map_json_rho_against_python_control(tmp_path, capsys):
     assert m["fallbacks"] == d["fallbacks"] == 0          # no point needed the slow path
     # throughput: the 6 points over the reported wall time (rounding only)
     assert m["points_per_s"] == pytest.approx(6 / m["elapsed_s"], rel=1e-9)
+    # timing: a positive float, no longer than the whole command measured in the test
+    assert isinstance(m["elapsed_s"], float) and 0.0 < m["elapsed_s"] <= d_wall
     assert {Path(v).name for v in d["files"].values()} == {"map.csv", "map.json", "map.png"}
     assert (out / "map.csv").exists() and Path(d["files"]["json"]) == out / "map.json"
     rho = np.array(m["rho"])
@@ -268,3 +273,28 @@ def test_map_json_pid_against_python_control(tmp_path, capsys):
             ref = np.max(np.abs(control.poles(cl)))
             # 1e-5: FD Jacobian through the pole map (the integrator pole is not cancelled)
             assert rho[iy, ix] == pytest.approx(ref, abs=1e-5), (pos, kd)
+
+
+def test_linearize_residual_recomputed_from_f(capsys, tmp_path):
+    """``equilibrium.residual`` of ``linearize --json`` (issue 17), recomputed: the largest
+    |f_i(x_e, u_e)| / (100 s_i) over every state but the position (equilibrium.py:
+    RATE_PER_SCALE = 100 1/s, s_i = Plant.state_scales()), f evaluated here at the state
+    and command the JSON prints. A plant with every effect that adds states (25 states)
+    and an external load, so that the solver's residual is not exactly zero (measured
+    5e-14 .. 2e-13): the two agree to 3e-8 relative (the printed state is the solver's to
+    the last digit); 1e-4 allows for rounding of the largest row."""
+    path = write_plant(tmp_path / "all.toml", ["leakage", "line_dynamics", "supply_droop",
+                                               "heat_transfer", "valve_dynamics", "valve_offset"],
+                       {"load.external_force": 15.0})
+    d = _run_json(capsys, ["linearize", str(path), "--x", "0.1", "--json"])
+    eq = d["equilibrium"]
+    plant = Plant.from_toml(path)
+    assert d["states"] == list(plant.state_names) and len(d["states"]) == 25
+    x_e = np.array([eq["state"][n] for n in d["states"]])
+    assert x_e[0] == 0.1 and x_e[1] == 0.0
+    f = plant.evaluate_f(x_e, eq["u"])
+    assert f[0] == 0.0                                    # dx/dt = v = 0: not a row
+    rows = np.abs(f[1:]) / (100.0 * plant.state_scales()[1:])
+    assert isinstance(eq["residual"], float)
+    assert 0.0 < eq["residual"] < 1e-9
+    assert eq["residual"] == pytest.approx(float(np.max(rows)), rel=1e-4)
