@@ -171,10 +171,12 @@ def test_rk4_exact_on_quartic():
 
 def test_jit_cache_hit(tmp_path, monkeypatch):
     # A second compile of the same Function finds the library by its source hash and
-    # runs no compiler; the compiled Function gives the VM's numbers.
-    if not jit.have_compiler():
-        pytest.skip("no C compiler")
+    # runs no compiler; the compiled Function gives the VM's numbers. Without a C
+    # compiler the contract of that case is checked instead (never a skip).
     monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path))
+    if not jit.have_compiler():
+        _no_compiler_contract(tmp_path, monkeypatch)
+        return
     x = ca.SX.sym("x", 2)
     fun = ca.Function("wb_test_cache", [x], [ca.vertcat(ca.sin(x[0]) * x[1], x[0] ** 3)])
     first = jit.compiled(fun)
@@ -196,3 +198,43 @@ def test_jit_cache_hit(tmp_path, monkeypatch):
     assert np.array_equal(np.asarray(first(v)), np.asarray(second(v)))
     assert np.allclose(np.asarray(second(v)), np.asarray(fun(v)), rtol=1e-15, atol=0)
     assert jit.shared_library("wb_test_src", src) == (so, True)
+
+
+def _no_compiler_contract(cache, monkeypatch):
+    """Without a C compiler: :func:`jit.compiled` returns the Function itself (the
+    virtual machine evaluates it, same numbers), :func:`jit.shared_library` refuses a
+    source it would have to build with a CompileError naming the compiler and writes
+    nothing, and a library already in the cache under the documented key
+    (``{name}_{sha256(source + flags + casadi version)[:20]}.so``, key computed here
+    with hashlib) is found without any compiler run."""
+    import hashlib
+    x = ca.SX.sym("x", 2)
+    fun = ca.Function("wb_test_nocc", [x], [ca.vertcat(ca.sin(x[0]) * x[1], x[0] ** 3)])
+    assert jit.compiled(fun) is fun
+    src = "double wb_twice(double x) { return 2.0 * x; }\n"
+    # "no C compiler found", or "the C compiler failed" when $CC names a missing one
+    with pytest.raises(jit.CompileError, match="C compiler"):
+        jit.shared_library("wb_test_src", src)
+    assert list(cache.glob("*")) == []
+    key = hashlib.sha256(src.encode() + b"-O2" + ca.__version__.encode()).hexdigest()[:20]
+    assert jit.source_digest(src.encode(), ("-O2",)) == key
+    planted = cache / f"wb_test_src_{key}.so"
+    planted.write_bytes(b"\x7fELF stand-in")
+    # another flag set is another key: not a hit, and still no compiler to build it
+    with pytest.raises(jit.CompileError, match="C compiler"):
+        jit.shared_library("wb_test_src", src, (("-O3",),))
+    assert list(cache.glob("*")) == [planted]
+
+    def no_compiler(*args, **kwargs):
+        raise AssertionError("a compiler ran on a cache hit")
+    monkeypatch.setattr(subprocess, "run", no_compiler)
+    assert jit.shared_library("wb_test_src", src) == (planted, True)
+
+
+def test_jit_without_compiler(tmp_path, monkeypatch):
+    # the no-compiler contract on every machine: no CC, no compiler on the PATH
+    monkeypatch.delenv("CC", raising=False)
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path))
+    monkeypatch.setattr(jit, "c_compiler", lambda: None)
+    assert not jit.have_compiler()
+    _no_compiler_contract(tmp_path, monkeypatch)

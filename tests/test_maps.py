@@ -141,7 +141,7 @@ def test_leaking_valve_falls_back_to_robust_equilibrium():
 
 
 def test_worker_processes_and_dask_give_the_same_map(situm):
-    pytest.importorskip("distributed")
+    # dask[distributed] is a dependency of the package (pyproject): imported, not skipped
     from distributed import Client, LocalCluster
     kp = maps.Axis.linspace("kp", 2, 80, 12)
     mass = maps.Axis.linspace("load.mass", 0.5, 4, 10)
