@@ -124,16 +124,35 @@ def make_plant(make_plant_file) -> Callable[..., Any]:
     return make
 
 
+#: (design, arguments) -> (exit code, folder of the one run): :func:`run_design` runs
+#: each quick design once per session and hands every later caller a copy.
+_DESIGN_RUNS: dict[tuple[str, ...], tuple[int, Path]] = {}
+
+
 def run_design(name: str, out: Path, *args: str) -> tuple[int, dict | None]:
     """Run ``designs/<name>.py``'s ``main(["--quick", *args, "--out", out])`` in-process.
 
-    Returns its exit code and its ``summary.json`` (None when it wrote none).
+    Returns its exit code and its ``summary.json`` (None when it wrote none). The run
+    is made once per session for the same name and arguments (the quick designs are
+    deterministic: fixed seeds) into a private folder; each caller gets a copy of its
+    files in ``out``, so a test that edits them does not affect another.
     """
     import json
     import runpy
-    root = Path(__file__).resolve().parents[1]
-    mod = runpy.run_path(str(root / "designs" / f"{name}.py"), run_name="design")
-    rc = mod["main"](["--quick", *args, "--out", str(out)])
+    import shutil
+    import tempfile
+    key = (name, *args)
+    if key not in _DESIGN_RUNS:
+        root = Path(__file__).resolve().parents[1]
+        mod = runpy.run_path(str(root / "designs" / f"{name}.py"), run_name="design")
+        import atexit
+        first = Path(tempfile.mkdtemp(prefix=f"wb_design_{name}_")) / "out"
+        atexit.register(shutil.rmtree, first.parent, True)
+        rc = mod["main"](["--quick", *args, "--out", str(first)])
+        _DESIGN_RUNS[key] = (rc, first)
+    rc, first = _DESIGN_RUNS[key]
+    if first.exists():
+        shutil.copytree(first, out, dirs_exist_ok=True)
     summary = out / "summary.json"
     return rc, (json.loads(summary.read_text()) if summary.exists() else None)
 

@@ -225,3 +225,346 @@ def test_concealed_quick_fitted_values(concealed):
     par, true = ms["result"]["findings"][0]["parameters"], ms["values"]
     assert par["load.mass"] == pytest.approx(true["load.mass"], rel=0.01)
     assert abs(true["load.mass"] / 1.2 - 1) > 0.1     # the concealed mass is a real error
+
+
+# =============================================================== every summary key (issue 17)
+# The validations and whole-run figures the designs write (workbench.validate /
+# workbench.compare), recomputed here from the CSV each design writes of the same run
+# (t, u, x, p_a, p_b, r[, q_supply] at the output grid, printed to the last digit) by
+# the definitions of the docstrings, written out independently. Tolerance 1e-9
+# relative (+1e-12 absolute): the same arithmetic on the same numbers.
+
+#: validate.Specification's documented defaults (its docstring; formats.md).
+SPEC_DEFAULTS = {"max_overshoot": 10.0, "max_settling_time": 1.5, "settling_band": 0.02,
+                 "band_floor": 1e-3, "max_steady_state_error": 1e-3, "steady_state_window": 0.5,
+                 "max_saturation": 0.1, "max_ramp_error": 0.02, "pressure_tolerance": 2e4}
+RHO_ANR_KG_M3 = 1.185          # physics.md: ISO 6358 / ANR reference density
+
+
+def _close(a, b, what, rel=1e-9, abs_=1e-12):
+    """a == b to rounding, NaN == NaN and inf == inf."""
+    a, b = float(a), float(b)
+    if math.isnan(b) or math.isinf(b):
+        assert (math.isnan(a) and math.isnan(b)) or a == b, (what, a, b)
+    else:
+        assert a == pytest.approx(b, rel=rel, abs=abs_), (what, a, b)
+
+
+def _trap(y, t):
+    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
+
+
+def _seg_values(seg, t, x, r, spec):
+    """One segment's metrics by the definitions of workbench.metrics' docstrings."""
+    sel = (t >= seg["start"] - 1e-9) & (t <= seg["end"] + 1e-9)
+    tt, xx = t[sel], x[sel]
+    rr = r[sel] if seg["kind"] == "ramp" else np.full(len(tt), seg["r_end"])
+    e = np.abs(rr - xx)
+    out = {"tracking_error": float(np.max(e)), "iae": _trap(e, tt)}
+    w = min(spec["steady_state_window"], 0.5 * (seg["end"] - seg["start"]))
+    if seg["kind"] in ("step", "hold"):
+        win = tt >= seg["end"] - w - 1e-9
+        out["steady_state_error"] = _trap(e[win], tt[win]) / (tt[win][-1] - tt[win][0])
+    if seg["kind"] == "step":
+        size = seg["r_end"] - seg["r_start"]
+        sgn = math.copysign(1.0, size)
+        band = max(spec["settling_band"] * abs(size), spec["band_floor"])
+        over = max(float(np.max(sgn * (xx - seg["r_end"]))), 0.0)
+        out.update(overshoot=100.0 * over / abs(size), overshoot_abs=over, band=band)
+        # settling: from the last sample outside the band, interpolated; inf when that
+        # is within the last window of the segment (still moving at its end)
+        outside = np.flatnonzero(np.abs(xx - seg["r_end"]) > band)
+        if len(outside) == 0:
+            st = 0.0
+        else:
+            k = int(outside[-1])
+            if k == len(tt) - 1 or tt[k] >= tt[-1] - w:
+                st = math.inf
+            else:
+                a_, b_ = abs(xx[k] - seg["r_end"]), abs(xx[k + 1] - seg["r_end"])
+                st = tt[k] + (a_ - band) / (a_ - b_) * (tt[k + 1] - tt[k]) - seg["start"]
+        out["settling_time"] = st
+        prog = sgn * (xx - seg["r_start"]) / abs(size)
+
+        def cross(level):
+            k = np.flatnonzero(prog >= level)
+            if len(k) == 0:
+                return math.inf
+            k = int(k[0])
+            return tt[k] if k == 0 else tt[k - 1] + (level - prog[k - 1]) / (
+                prog[k] - prog[k - 1]) * (tt[k] - tt[k - 1])
+        out["rise_time"] = cross(0.9) - cross(0.1) if math.isfinite(cross(0.9)) else math.inf
+    return out
+
+
+def check_validation(v, df, u_limits=(0.0, 10.0), p_atm=101325.0, p_s=6e5):
+    """A ``Validation.to_dict()`` against the CSV of the same run (see above)."""
+    t, x, u, r = (df[c].to_numpy() for c in ("t", "x", "u", "r"))
+    p_all = np.concatenate([df["p_a"].to_numpy(), df["p_b"].to_numpy()])
+    spec = v["spec"]
+    assert spec == SPEC_DEFAULTS
+    assert isinstance(v["label"], str) and v["label"] and v["error"] is None
+    assert isinstance(v["wall_time"], float) and v["wall_time"] > 0.0
+    segs = v["segments"]
+    # the segments tile the profile, and the CSV's r is their reference
+    assert segs[0]["start"] == 0.0 and all(a["end"] == b["start"] for a, b in zip(segs, segs[1:]))
+    for s in segs:
+        sel = (t > s["start"] + 1e-9) & (t < s["end"] - 1e-9)
+        ref = (s["r_start"] + (t[sel] - s["start"]) / (s["end"] - s["start"])
+               * (s["r_end"] - s["r_start"])) if s["kind"] == "ramp" else s["r_end"]
+        np.testing.assert_allclose(r[sel], ref, atol=1e-12)
+        assert s["complete"] is True
+        mine = _seg_values(s, t, x, r, spec)
+        for k in ("overshoot", "overshoot_abs", "settling_time", "rise_time", "band",
+                  "steady_state_error", "tracking_error", "iae"):
+            _close(s[k], mine.get(k, math.nan), (s["kind"], s["start"], k))
+    m = v["metrics"]
+    _close(m["iae"], _trap(np.abs(r - x), t), "iae")
+    lo, hi = u_limits
+    sat = (u <= lo + 1e-9 * (hi - lo)) | (u >= hi - 1e-9 * (hi - lo))
+    _close(m["saturation_fraction"], np.sum(np.diff(t) * sat[:-1]) / (t[-1] - t[0]), "sat")
+    _close(m["p_min"], p_all.min(), "p_min")
+    _close(m["p_max"], p_all.max(), "p_max")
+    ramps = [_seg_values(s, t, x, r, spec)["tracking_error"] for s in segs if s["kind"] == "ramp"]
+    _close(m["ramp_error_max"], max(ramps), "ramp_error_max")
+    _close(m["simulated_time"], t[-1], "simulated_time")
+    _close(m["duration"], segs[-1]["end"], "duration")
+    assert m["simulated_time"] >= m["duration"] - 1e-9
+    # the checks: each value, its limit, and pass = value within the limit
+    checks = {c["name"]: c for c in v["checks"]}
+    assert list(checks) == ["simulation", "overshoot", "settling time", "steady-state error",
+                            "ramp tracking error", "command saturation",
+                            "min chamber pressure", "max chamber pressure"]
+    for c in v["checks"]:
+        ok = c["value"] <= c["limit"] if c["bound"] == "max" else c["value"] >= c["limit"]
+        assert c["passed"] is bool(ok), c
+    steps = [s for s in segs if s["kind"] == "step"]
+    _close(checks["simulation"]["value"], m["duration"], "simulation")
+    _close(checks["overshoot"]["value"], max(
+        steps, key=lambda s: s["overshoot"] / max(spec["max_overshoot"], 100 * spec["band_floor"]
+                                                   / abs(s["r_end"] - s["r_start"])))["overshoot"],
+        "worst overshoot")
+    _close(checks["settling time"]["value"], max(s["settling_time"] for s in steps), "settling")
+    _close(checks["settling time"]["limit"], spec["max_settling_time"], "settling limit")
+    _close(checks["steady-state error"]["value"], max(
+        s["steady_state_error"] for s in segs if s["kind"] in ("step", "hold")), "sse")
+    _close(checks["ramp tracking error"]["value"], m["ramp_error_max"], "ramp")
+    _close(checks["command saturation"]["value"], 100 * m["saturation_fraction"], "sat %")
+    _close(checks["command saturation"]["limit"], 100 * spec["max_saturation"], "sat limit")
+    _close(checks["min chamber pressure"]["value"], m["p_min"], "p_min check")
+    _close(checks["min chamber pressure"]["limit"], p_atm - spec["pressure_tolerance"], "p lo")
+    _close(checks["max chamber pressure"]["value"], m["p_max"], "p_max check")
+    _close(checks["max chamber pressure"]["limit"], p_s + spec["pressure_tolerance"], "p hi")
+    assert v["passed"] is all(c["passed"] for c in v["checks"])
+    return v
+
+
+def check_figures(f, v, df, air_bound=None):
+    """A ``compare.run_figures`` dict against the CSV and the validation ``v`` of the same
+    run. Without ``q_supply`` in the CSV the air is bounded instead (``air_bound``, kg)."""
+    t, x, u, r = (df[c].to_numpy() for c in ("t", "x", "u", "r"))
+    e = np.abs(r - x)
+    segs = v["segments"]
+    settled = np.ones(len(t), dtype=bool)
+    for s in segs:
+        if s["kind"] == "step":
+            settled &= ~((t >= s["start"]) & (t < s["start"] + 0.5))
+    steps = [s for s in segs if s["kind"] == "step"]
+    fin = lambda vals: max((q for q in vals if not math.isnan(q)), default=math.nan)  # noqa: E731
+    _close(f["iae"], v["metrics"]["iae"], "iae")
+    _close(f["max_error"], e.max(), "max_error")
+    _close(f["max_error_settled"], e[settled].max(), "max_error_settled")
+    _close(f["settling_time"], fin(s["settling_time"] for s in steps), "settling_time")
+    _close(f["overshoot"], fin(s["overshoot"] for s in steps), "overshoot")
+    _close(f["overshoot_abs"], fin(s["overshoot_abs"] for s in steps), "overshoot_abs")
+    _close(f["steady_state_error"], fin(s["steady_state_error"] for s in segs
+                                        if s["kind"] in ("step", "hold")), "sse")
+    _close(f["ramp_error"], v["metrics"]["ramp_error_max"], "ramp_error")
+    if "q_supply" in df:
+        _close(f["air_kg"], _trap(df["q_supply"].to_numpy(), t), "air_kg")
+    else:
+        assert 0.0 < f["air_kg"] < air_bound
+    _close(f["air_l_anr"], f["air_kg"] / RHO_ANR_KG_M3 * 1e3, "air_l_anr")
+    # u is held between control samples: its total variation over the output grid is
+    # that over the control samples
+    _close(f["command_activity"], np.sum(np.abs(np.diff(u))) / (t[-1] - t[0]), "activity",
+           rel=1e-6)
+    _close(f["saturation"], v["metrics"]["saturation_fraction"], "saturation")
+    for k, arr in (("u", u), ("x", x)):
+        _close(f[f"{k}_min"], arr.min(), k + "_min")
+        _close(f[f"{k}_max"], arr.max(), k + "_max")
+    _close(f["p_min"], v["metrics"]["p_min"], "p_min")
+    _close(f["p_max"], v["metrics"]["p_max"], "p_max")
+    assert f["passed"] is v["passed"]
+    assert f["failed"] == [c["name"] for c in v["checks"] if not c["passed"]]
+
+
+def _csv(path):
+    return pd.read_csv(path, comment="#")
+
+
+def test_situm_design_every_validation_key(situm_report):
+    """situm_p_pd's validation blocks from its CSVs; the gains and loop gains by hand."""
+    _, out = situm_report
+    s = json.loads((out / "summary.json").read_text(), parse_constant=float)
+    for key, csv_name in (("validation_p", "validation_p.csv"), ("validation_pd", "validation_pd.csv")):
+        check_validation(s[key], _csv(out / csv_name), p_s=5e5)
+    # P loop: K0 = kp Kv with the plant's kp = 10 V/m (TOML) and Kv of the exact model
+    assert s["k0_p"] == pytest.approx(10.0 * s["limits_rig"]["kv"], rel=1e-12)
+    assert s["k0_pd"] == pytest.approx(s["kp_pd"] * s["limits_rig"]["kv"], rel=1e-9)
+    assert s["kd_pd"] > 0 and s["design_passed"] is s["validation_pd"]["passed"]
+
+
+def _load(out):
+    return json.loads((out / "summary.json").read_text(), parse_constant=float)
+
+
+@pytest.fixture(scope="module")
+def fl_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fl_position")
+    rc, _ = run_design("fl_position", out)
+    return rc, out, _load(out)
+
+
+def test_fl_design_every_key(fl_run):
+    """fl_position: validations and figures from its CSVs, gains from the bandwidth,
+    feasibility from its definitions, the must-show table's own arithmetic."""
+    rc, out, s = fl_run
+    assert s["quick"] is True and rc == (0 if s["design_passed"] else 1)
+    names = {"FL nominal": "fl_nominal", "PD nominal": "pd_nominal", "FL full": "fl_full",
+             "PD full": "pd_full"}
+    assert set(s["validations"]) == set(s["metrics"]) == set(names)
+    for name, stem in names.items():
+        df = _csv(out / f"validation_{stem}.csv")
+        v = check_validation(s["validations"][name], df)
+        # no q_supply column: the air is bounded by the fully open valve's choked flow
+        # for the whole run, C p_s rho0 T (rig25_mpye.toml: C = 6.25e-8, 6 bar)
+        check_figures(s["metrics"][name], v, df,
+                      air_bound=6.25e-8 * 6e5 * RHO_ANR_KG_M3 * (df["t"].iloc[-1]))
+    assert s["fl_full_passed"] is s["validations"]["FL full"]["passed"]
+    # gains of the error dynamics (s + w)^4 with all four poles at -w (damping 1):
+    # binomial coefficients 4 w, 6 w^2, 4 w^3, w^4
+    w = s["bandwidth"]
+    assert s["damping"] == 1.0 and s["feasibility"]["bandwidth"] == w
+    g = s["gains"]
+    for k, ref in (("k2", 4 * w), ("k1", 6 * w ** 2), ("k0", 4 * w ** 3), ("ki", w ** 4)):
+        assert g[k] == pytest.approx(ref, rel=1e-12), k
+    f = s["feasibility"]
+    # the sampling limit pi / (10 T) (the refusal message states it)
+    assert f["sampling_limit"] == pytest.approx(math.pi / (10 * f["sample_time"]), rel=1e-12)
+    assert f["sample_time"] == 0.01 and w < f["sampling_limit"]
+    # feasible: every need within the margin of what is available, and no reason given
+    assert f["reasons"] == [] and f["max_bandwidth"] is None and f["margin"] == 0.8
+    for need, avail in (("gamma_needed", "gamma_available"), ("flow_needed", "flow_available"),
+                        ("force_needed", "force_available")):
+        assert 0.0 < f[need] <= f["margin"] * f[avail], need
+    assert f["gamma_available"] == 1.0            # a fully open valve
+    # the largest pneumatic force either way: one chamber at supply, the other at
+    # atmosphere, (p_s - p_atm) A (rodless 25 mm bore, rig25_mpye.toml)
+    area = math.pi / 4 * 0.025 ** 2
+    assert f["force_available"] == pytest.approx((6e5 - 101325.0) * area, rel=1e-9)
+    # closed centre: no flow at zero opening, so the flow is proportional to the opening
+    # term G and flow_needed / flow_available = gamma_needed / gamma_available
+    assert f["flow_needed"] / f["flow_available"] == pytest.approx(
+        f["gamma_needed"] / f["gamma_available"], rel=1e-9)
+    assert f["pressures"][0] == f["pressures"][1]             # rodless, at mid stroke
+    # flow available: the fully open valve, choked flow bound C p_s rho0 (ISO 6358)
+    assert f["flow_available"] <= 6.25e-8 * 6e5 * RHO_ANR_KG_M3
+    assert 0.0 <= f["when"] <= s["validations"]["FL nominal"]["metrics"]["duration"]
+    # refused designs: each named, with the reason the FL design gives
+    assert len(s["refused"]) == 2
+    for label, why, msg in s["refused"]:
+        assert "feedback linearisation refused" in msg and label and why
+    assert "sampling limit" in s["refused"][0][2]
+    # must-show: fraction = max error / |step| per step, the worst of them, below 2 %
+    ms = s["must_show"]
+    for st in ms["steps"]:
+        assert st["fraction"] == pytest.approx(st["max_error"] / abs(st["size"]), rel=1e-12)
+    assert ms["worst_fraction"] == max(st["fraction"] for st in ms["steps"])
+    assert ms["bound"] == 0.02 and ms["worst_fraction"] < ms["bound"]
+    # PD: the stable sampled loop (|z| < 1) the design compares against; the plant
+    # file's PD (20, 1) is not (rho > 1), which is why the design retunes it
+    assert s["pd"]["rho"] < 1.0 < s["rho_file_pd"] and s["pd"]["kp"] > 0 and s["pd"]["kd"] > 0
+    # the quick verdict's rule (the validations of short holds are not judged): the
+    # must-show bound and both refusals given
+    refusals = all("refused" in r[2] for r in s["refused"])
+    assert s["design_passed"] is bool(ms["worst_fraction"] < ms["bound"] and refusals)
+
+
+@pytest.fixture(scope="module")
+def nmpc_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("nmpc_position")
+    rc, _ = run_design("nmpc_position", out, "--no-jit")
+    return rc, out, _load(out)
+
+
+def test_nmpc_design_every_key(nmpc_run):
+    """nmpc_position: validations and figures from its CSVs (with q_supply), the IAE
+    ratio, the constraint table from the same runs, the solve-time statistics' order."""
+    rc, out, s = nmpc_run
+    assert s["quick"] is True and rc == (0 if s["design_passed"] else 1)
+    for key, stem in (("nmpc", "nmpc"), ("pd", "pd")):
+        df = _csv(out / f"validation_{stem}.csv")
+        v = check_validation(s[f"validation_{stem}"], df)
+        check_figures(s[key], v, df)
+    assert s["validation_pd"]["label"] == f"PD kp={s['pd_gains']['kp']:g} kd={s['pd_gains']['kd']:g}"
+    assert s["iae_ratio_pd_over_nmpc"] == pytest.approx(s["pd"]["iae"] / s["nmpc"]["iae"], rel=1e-12)
+    # the constraint table: the validation run's ranges in V, bar and mm from the CSV
+    df = _csv(out / "validation_nmpc.csv")
+    p = np.concatenate([df["p_a"], df["p_b"]])
+    rows = {(c["run"], c["quantity"].split(" (")[0]): c for c in s["constraints"]}
+    val = {q: c for (run, q), c in rows.items() if run == "validation"}
+    assert val["command"]["min"] == pytest.approx(df["u"].min(), rel=1e-12)
+    assert val["command"]["max"] == pytest.approx(df["u"].max(), rel=1e-12)
+    assert val["chamber pressures"]["min"] == pytest.approx(p.min() / 1e5, rel=1e-12)
+    assert val["chamber pressures"]["max"] == pytest.approx(p.max() / 1e5, rel=1e-12)
+    assert val["position"]["min"] == pytest.approx(df["x"].min() * 1e3, rel=1e-12)
+    assert val["position"]["max"] == pytest.approx(df["x"].max() * 1e3, rel=1e-12)
+    # ok = inside the plant's limits: command 0..10 V, pressures between atmosphere and
+    # supply (1.013..6 bar), position within the 500 mm stroke (rig25_mpye.toml)
+    limits = {"command": (0.0, 10.0), "chamber pressures": (1.01325 - 1e-9, 6.0 + 1e-9),
+              "position": (0.0, 500.0)}
+    for (run, q), c in rows.items():
+        lo, hi = limits[q]
+        assert c["ok"] is bool(lo <= c["min"] <= c["max"] <= hi), (run, q)
+    assert {run for run, _ in rows} == {"validation", "limit steps"}
+    assert s["constraints_held"] is all(c["ok"] for c in s["constraints"])
+    st = s["solve_time"]
+    assert 0.0 < st["median_ms"] <= st["p99_ms"] <= st["max_ms"]
+    # one solve per control sample of the 11.35 s profile at 10 ms, both ends included
+    assert st["samples"] == round(s["validation_nmpc"]["metrics"]["duration"] / 0.01) + 1
+    assert st["qp_failures"] == 0 and st["restarts"] >= 0 and isinstance(st["restarts"], int)
+    assert s["design_passed"] is bool(s["constraints_held"] and s["validation_nmpc"]["passed"]
+                                      and s["nmpc"]["iae"] < s["pd"]["iae"])
+
+
+@pytest.fixture(scope="module")
+def comparison_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("nonlinear_comparison")
+    # the arguments of tests/test_comparison_design.py: the same (shared) run
+    rc, _ = run_design("nonlinear_comparison", out, "--no-jit", "--workers", "2")
+    return rc, out, _load(out)
+
+
+def test_comparison_design_every_validation_and_figure(comparison_run):
+    """nonlinear_comparison: all six validations and figures from the CSVs (the robustness
+    tables and verdict are checked in tests/test_comparison_design.py)."""
+    _, out, s = comparison_run
+    for where in ("nominal", "full"):
+        for name in ("PD", "FL", "NMPC"):
+            df = _csv(out / f"validation_{name.lower()}_{where}.csv")
+            v = check_validation(s["validations"][where][name], df)
+            check_figures(s["figures"][where][name], v, df)
+    # the NMPC with the lines model on the rig: a second run of the same profile; its
+    # figures obey the same identities (no CSV is written for it)
+    f = s["nmpc_lines_model_on_rig"]
+    assert f["air_l_anr"] == pytest.approx(f["air_kg"] / RHO_ANR_KG_M3 * 1e3, rel=1e-12)
+    assert f["max_error_settled"] <= f["max_error"] and f["ramp_error"] <= f["max_error"]
+    assert f["overshoot_abs"] <= f["max_error"] and f["passed"] is (f["failed"] == [])
+    assert 0.0 <= f["u_min"] <= f["u_max"] <= 10.0 and 0 < f["x_min"] < f["x_max"] < 0.5
+    assert s["pd"] == {"kp": 8.0, "kd": 0.1}
+    for key, r in s["robustness"].items():
+        for name, c in r["controllers"].items():
+            assert c["pass_rate"] == pytest.approx(np.mean(c["passed"]), rel=1e-12), (key, name)
+            assert len(c["scores"]) == len(c["failed_checks"]) == len(r["draws"])
+            assert all(p is (not f_) for p, f_ in zip(c["passed"], c["failed_checks"]))

@@ -7,9 +7,7 @@ inversion is checked against the same CasADi physics the simulator integrates.
 
 from __future__ import annotations
 
-import json
 import math
-import runpy
 from pathlib import Path
 
 import casadi as ca
@@ -252,9 +250,8 @@ def test_force_bandwidth_refused_beyond_nyquist(affine):
 
 # ---------------------------------------------------------------------- design script
 def test_force_tracking_design_smoke(tmp_path):
-    mod = runpy.run_path(str(ROOT / "designs" / "force_tracking.py"), run_name="design")
-    rc = mod["main"](["--quick", "--out", str(tmp_path)])
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    from conftest import run_design          # one quick run per session (test_designs too)
+    rc, summary = run_design("force_tracking", tmp_path)
     assert rc == (0 if summary["design_passed"] else 1)
     assert summary["design_passed"]
     assert (tmp_path / "report.pdf").read_bytes().startswith(b"%PDF")

@@ -25,9 +25,10 @@ def design():
 
 @pytest.fixture(scope="module")
 def quick_report(design, tmp_path_factory):
+    from conftest import run_design          # one quick run per session (test_designs too)
     out = tmp_path_factory.mktemp("pressure_plan_position")
-    rc = design["main"](["--quick", "--out", str(out)])
-    return rc, out, json.loads((out / "summary.json").read_text())
+    rc, summary = run_design("pressure_plan_position", out)
+    return rc, out, summary
 
 
 @pytest.fixture(scope="module")
