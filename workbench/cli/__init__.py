@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 import traceback
 from typing import Sequence
@@ -81,24 +82,52 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``workbench`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
 
-    0 success, 2 an error the user can fix (message on stderr), 1 a broken command
-    module, 130 interrupted.
+    0 success, 2 an error the user can fix (one line on stderr), 1 a broken command
+    module, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). An interrupted or
+    terminated command writes nothing (its result set is never moved into place), also
+    when the signal arrived inside C code that reported it as an ordinary failure.
     """
+    from ..output import (EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated, interrupted,
+                          stop_on_signals)
+    name = "workbench"
     try:
-        parser = build_parser()
-    except CommandModuleError as exc:
-        print(f"workbench: error: {exc}", file=sys.stderr)
-        return EXIT_BROKEN
-    args = parser.parse_args(argv)
+        with stop_on_signals():
+            try:
+                parser = build_parser()
+            except CommandModuleError as exc:
+                print(f"workbench: error: {exc}", file=sys.stderr)
+                return EXIT_BROKEN
+            try:
+                args = parser.parse_args(argv)
+            except SystemExit as exc:       # --help (0) or a bad argument (2, one line)
+                return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+            name = " ".join(["workbench", args.command]
+                            + ([args.method] if getattr(args, "method", None) else []))
+            code = _run(args, name)
+            if interrupted() is not None:        # swallowed by C code, surfaced here
+                raise Terminated() if interrupted() == signal.SIGTERM else KeyboardInterrupt()
+            return code
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted (Ctrl-C); no result written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Terminated:
+        print(f"{name}: terminated (SIGTERM); no result written", file=sys.stderr)
+        return EXIT_TERMINATED
+
+
+
+def _run(args: argparse.Namespace, name: str) -> int:
+    """Call the command's handler; a user's error is one line on stderr, exit 2."""
     try:
         return int(args.func(args) or 0)
     except WorkbenchError as exc:
-        print(f"workbench {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:          # output piped into e.g. `head`: not an error
         import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:           # a full disk, a vanished folder: no traceback
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"{name}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
