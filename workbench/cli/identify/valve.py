@@ -12,10 +12,23 @@ from typing import Any
 import numpy as np
 
 from ...errors import InputError
-from ...identify.valve import (ValveFitReport, analyse, centre_dense_commands,
-                               compare_pressure_gain, generate_valve_table, load_valve_table,
-                               valve_flow_law, write_figures)
 from ...params import PlantParams, atomic_write_text
+
+
+def _lazy(name: str):
+    """``workbench.identify.valve.<name>``, imported on first call (h15io: the parser is
+    built at every start, and identify.valve loads SciPy and CasADi; ``--help`` < 1 s)."""
+    def call(*args, **kwargs):
+        from ...identify import valve
+        return getattr(valve, name)(*args, **kwargs)
+    call.__name__ = name
+    return call
+
+
+(ValveFitReport, analyse, centre_dense_commands, compare_pressure_gain, generate_valve_table,
+ load_valve_table, valve_flow_law, write_figures) = map(_lazy, (
+    "ValveFitReport", "analyse", "centre_dense_commands", "compare_pressure_gain",
+    "generate_valve_table", "load_valve_table", "valve_flow_law", "write_figures"))
 
 __all__ = ["add_valve"]
 
