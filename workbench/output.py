@@ -76,6 +76,12 @@ def check_output_dir(out: str | os.PathLike, *, option: str = "--out") -> Path:
         raise InputError(f"{option} {text} lies under {parent}, which is a file, not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"{option} {text}: cannot write in {parent} (permission denied)")
+    try:                        # the real test (root, ACLs, read-only mounts, full quota)
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise InputError(f"{option} {text}: cannot write in {parent} "
+                         f"({exc.strerror or exc})") from None
     return path
 
 

@@ -103,7 +103,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
             name = " ".join(["workbench", args.command]
                             + ([args.method] if getattr(args, "method", None) else []))
-            code = _run(args, name)
+            try:
+                code = _run(args, name)
+            except Exception:
+                if interrupted() is None:        # a bug: its traceback is the report
+                    raise
+                code = None                      # e.g. SystemError from a C call it hit
             if interrupted() is not None:        # swallowed by C code, surfaced here
                 raise Terminated() if interrupted() == signal.SIGTERM else KeyboardInterrupt()
             return code

@@ -78,7 +78,7 @@ def _parse_bounds(items: Sequence[str]) -> dict[str, tuple[float, float]]:
 
 def _cmd_greybox(args) -> int:
     out_dir = (prepare_output(args.out, GREYBOX_FILES, [args.plant, *args.recordings])
-               if args.out else None)
+               if args.out is not None else None)
     if not args.shooting_interval > 0:
         raise InputError(f"--shooting-interval must be > 0 s, got {args.shooting_interval:g}",
                          location="--shooting-interval")
