@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 import traceback
@@ -98,8 +99,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"workbench: error: {exc}", file=sys.stderr)
                 return EXIT_BROKEN
             try:
+                _refuse_nul(sys.argv[1:] if argv is None else argv)
                 args = parser.parse_args(argv)
             except SystemExit as exc:       # --help (0) or a bad argument (2, one line)
+                if isinstance(exc.code, str):
+                    print(exc.code, file=sys.stderr)
                 return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
             name = " ".join(["workbench", args.command]
                             + ([args.method] if getattr(args, "method", None) else []))
@@ -129,10 +133,38 @@ def _run(args: argparse.Namespace, name: str) -> int:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
     except BrokenPipeError:          # output piped into e.g. `head`: not an error
-        import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except OSError as exc:           # a full disk, a vanished folder: no traceback
         where = f" ({exc.filename})" if exc.filename else ""
         print(f"{name}: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
+    except UnicodeDecodeError as exc:  # a loader that read text without saying which file
+        print(f"{name}: error: {_undecodable(args) or 'an input file'} is not UTF-8 text "
+              f"(byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); save it as "
+              f"UTF-8", file=sys.stderr)
+        return 2
+
+
+def _undecodable(args: argparse.Namespace) -> str | None:
+    """The first file named in ``args`` that is not UTF-8 text, or None."""
+    values = []
+    for v in vars(args).values():
+        values += v if isinstance(v, list) else [v]
+    for v in values:
+        if isinstance(v, str) and os.path.isfile(v):
+            try:
+                with open(v, encoding="utf-8") as fh:
+                    fh.read()
+            except UnicodeDecodeError:
+                return v
+            except OSError:
+                continue
+    return None
+
+
+def _refuse_nul(argv: Sequence[str]) -> None:
+    """A NUL character cannot be in a file name or a number: refuse it up front."""
+    for a in argv:
+        if "\x00" in a:
+            raise SystemExit(f"workbench: error: argument {a!r} contains a NUL character")

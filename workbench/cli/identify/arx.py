@@ -76,9 +76,9 @@ def add_arx(subparsers: Any) -> argparse.ArgumentParser:
                    help="nb grid for --select (default 1:3)")
     p.add_argument("--nk", type=_int_range, default=range(0, 5), metavar="LO:HI",
                    help="nk grid for --select (default 0:4)")
-    p.add_argument("--lags", type=positive_int, default=25, metavar="M",
-                   help="correlation lags of the residual tests, samples (default 25; at "
-                        "most a quarter of the validation residuals)")
+    p.add_argument("--lags", type=positive_int, default=None, metavar="M",
+                   help="correlation lags of the residual tests, samples (default 25 or a "
+                        "quarter of the validation residuals if fewer; at most that quarter)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--out", metavar="DIR",
                    help="also write DIR/arx.json, DIR/residuals.png and DIR/validation.png")
@@ -151,7 +151,7 @@ def _arx_fit(args: argparse.Namespace, ye, ue, yv, uv, ts, src):
         else:
             model = fit_arx(ye, ue, tuple(args.orders), sample_time=ts,
                             offset=args.offset)
-        _check_lags(args.lags, len(yv) - model.max_lag)
+        args.lags = _check_lags(args.lags, len(yv) - model.max_lag)
         check = validate(model, yv, uv, lags=args.lags)
     except InputError as exc:
         if exc.source:
@@ -161,14 +161,18 @@ def _arx_fit(args: argparse.Namespace, ye, ue, yv, uv, ts, src):
     return model, check, selection
 
 
-def _check_lags(lags: int, residuals: int) -> None:
+def _check_lags(lags: int | None, residuals: int) -> int:
     """--lags within what the residual tests can use: a quarter of the residuals (a
-    correlation at lag k averages N - k products; beyond N/4 it is noise, Box-Jenkins)."""
+    correlation at lag k averages N - k products; beyond N/4 it is noise, Box-Jenkins).
+    Not given: 25, or that quarter when it is smaller."""
     limit = max(1, residuals // 4)
+    if lags is None:
+        return min(25, limit)
     if lags > limit:
         raise InputError(f"--lags {lags} is more than the residual tests can use: the "
                          f"validation part has {residuals} residuals, so at most "
                          f"{limit} lags (a quarter of them)", location="--lags")
+    return lags
 
 
 def _arx_result(args: argparse.Namespace, model: ArxModel, check: ArxValidation, rec,

@@ -12,7 +12,9 @@ from typing import Any
 import numpy as np
 
 from ...errors import InputError
+from ...output import check_not_input
 from ...params import PlantParams, atomic_write_text
+from ..common import positive_int
 
 
 def _lazy(name: str):
@@ -96,8 +98,8 @@ def add_valve(subparsers) -> None:
     g.add_argument("--p", metavar="LIST",
                    help="pressures, Pa abs: a,b,c or START:STOP:NUM (default: 15 from "
                         "atmosphere to supply)")
-    g.add_argument("--n-u", type=int, default=21, help="number of default commands")
-    g.add_argument("--n-p", type=int, default=15, help="number of default pressures")
+    g.add_argument("--n-u", type=positive_int, default=21, help="number of default commands")
+    g.add_argument("--n-p", type=positive_int, default=15, help="number of default pressures")
     g.set_defaults(func=_cmd_valve_table)
 
 
@@ -220,6 +222,7 @@ def _float_list(text: str, option: str) -> np.ndarray:
 
 
 def _cmd_valve_table(args: argparse.Namespace) -> int:
+    check_not_input([args.out], [args.plant])       # h15io: never overwrite the input
     prm = PlantParams.from_toml(args.plant)
     cmd = ["workbench", "identify", "valve-table", str(args.plant), "--out", str(args.out),
            "--leakage", repr(args.leakage), "--noise", repr(args.noise), "--seed", str(args.seed)]
