@@ -142,6 +142,25 @@ def test_terminated_robustness_stops_its_workers(tmp_path):
     assert alive == []
 
 
+@linux_only
+def test_ctrl_c_during_the_imports_is_a_clean_stop(tmp_path, long_recording):
+    # on 8c8e7dd: a traceback from inside `import workbench` (it imported everything)
+    out = tmp_path / "sim"
+    proc = _start(["simulate", str(PLANT), str(long_recording), "--out", str(out)])
+    end = time.monotonic() + 60
+    while time.monotonic() < end and proc.poll() is None:     # numpy's core is loading
+        try:
+            if "_multiarray_umath" in Path(f"/proc/{proc.pid}/maps").read_text():
+                break
+        except OSError:
+            pass
+        time.sleep(0.005)
+    rc, stdout, err, _ = _stop(proc, signal.SIGINT)
+    assert rc == 130, err
+    assert "interrupted (Ctrl-C)" in err and "Traceback" not in err and stdout == ""
+    assert _leftovers(out) == []
+
+
 # --------------------------------------------------------------- in-process, no signal sent
 def _pretend(sig: int):
     """Inside stop_on_signals, as if ``sig`` had arrived and C code had swallowed it."""

@@ -198,7 +198,10 @@ def stop_on_signals() -> Iterator[None]:
     signal whose disposition is "ignore" (a background job of a non-interactive shell)
     stays ignored.
     """
-    if _DEPTH[0] > 0 or threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread():
+        yield                       # signals reach the main thread only
+        return
+    if _DEPTH[0] > 0:
         _DEPTH[0] += 1
         try:
             yield
@@ -217,12 +220,13 @@ def stop_on_signals() -> Iterator[None]:
         _DEPTH[0] -= 1
         for sig, h in old.items():
             signal.signal(sig, h)
+        _RECEIVED.clear()           # outside a block nothing is remembered
 
 
 def interrupted() -> int | None:
     """The signal (``signal.SIGINT`` or ``SIGTERM``) received within the current
-    :func:`stop_on_signals` block, or None."""
-    return _RECEIVED[0] if _RECEIVED else None
+    :func:`stop_on_signals` block, or None (always None outside a block)."""
+    return _RECEIVED[0] if _RECEIVED and _DEPTH[0] > 0 else None
 
 
 def reraise_interrupt(exc: BaseException | None = None) -> None:

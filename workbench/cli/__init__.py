@@ -52,6 +52,8 @@ def _register(group: str, subparsers) -> None:
     try:
         importlib.import_module(module_name).register(subparsers)
     except Exception as exc:            # any failure: a broken module, not a missing command
+        from ..output import reraise_interrupt
+        reraise_interrupt(exc)          # numpy turns a Ctrl-C in its import into ImportError
         cause = "".join(traceback.format_exception(exc)).rstrip()
         raise CommandModuleError(f"the command module {module_name} cannot be loaded "
                                  f"({type(exc).__name__}: {exc}); its commands are "
@@ -87,7 +89,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     module, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). An interrupted or
     terminated command writes nothing (its result set is never moved into place), also
     when the signal arrived inside C code that reported it as an ordinary failure.
+
+    Called as the program (``argv`` None), a stopped run ends the process at once with
+    130 / 143: a Ctrl-C that hit an extension module's start-up code can leave the
+    interpreter set to re-raise SIGINT at exit (exit status -2 instead of 130).
     """
+    try:
+        code = _main(argv)
+    except KeyboardInterrupt:           # before the signal handlers were installed
+        print("workbench: interrupted (Ctrl-C)", file=sys.stderr)
+        code = 130
+    if argv is None and code in (130, 143):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
     from ..output import (EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated, interrupted,
                           stop_on_signals)
     name = "workbench"
@@ -117,12 +136,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise Terminated() if interrupted() == signal.SIGTERM else KeyboardInterrupt()
             return code
     except KeyboardInterrupt:
-        print(f"{name}: interrupted (Ctrl-C); no result written", file=sys.stderr)
+        print(f"{name}: interrupted (Ctrl-C)", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Terminated:
-        print(f"{name}: terminated (SIGTERM); no result written", file=sys.stderr)
+        print(f"{name}: terminated (SIGTERM)", file=sys.stderr)
         return EXIT_TERMINATED
-
 
 
 def _run(args: argparse.Namespace, name: str) -> int:

@@ -43,6 +43,9 @@ def _simulate(args: argparse.Namespace) -> int:
     from ..replay import replay
     plant = Plant.from_toml(args.plant)
     rec = Recording.load(args.recording)
+    if not args.quiet:              # a line even where no progress bar is drawn (no tty)
+        print(f"simulate: replaying {len(rec)} samples ({rec.duration:.3g} s) of "
+              f"{args.recording} ...", file=sys.stderr, flush=True)
     result = replay(plant, rec, mode=args.mode, progress=None if not args.quiet else False)
     sim_rec = result.recording
     fits = fit_signals(rec, sim_rec, names=[n for n in ("x", "p_a", "p_b") if n in rec])
@@ -61,8 +64,6 @@ def _write(args: argparse.Namespace, out_dir: Path, rec, sim_rec, fits, title: s
     """simulation.csv, fit.json (strict JSON: an undefined fit is null) and
     simulation.png, all or none."""
     from ..output import result_set, write_json
-    if not args.quiet:
-        print("writing results ...", file=sys.stderr, flush=True)
     with result_set(out_dir, inputs=[args.plant, args.recording]) as stage:
         sim_rec.to_csv(stage / "simulation.csv")
         write_json(stage / "fit.json", fits)
