@@ -211,6 +211,10 @@ def _map(args: argparse.Namespace) -> int:
     xa, ya = maps.parse_axis(args.x_axis), maps.parse_axis(args.y_axis)
     ctrl = map_controller(plant, {xa.name, ya.name}, kp=args.kp, kd=args.kd, ki=args.ki,
                           sample_time=args.sample_time)
+    if not args.quiet:              # a line even where no progress bar is drawn (no tty)
+        import sys
+        print(f"map: {len(xa)} x {len(ya)} = {len(xa) * len(ya)} points ...", file=sys.stderr,
+              flush=True)
     smap = maps.stability_map(plant, xa, ya, position=args.position, controller=ctrl,
                               delay_samples=args.delay, scheduler=args.scheduler,
                               workers=args.workers, progress=not args.quiet and None)

@@ -89,6 +89,10 @@ def _cmd_greybox(args) -> int:
     from ...recording import load_recording
     plant = Plant.from_toml(args.plant)
     recs = [load_recording(p) for p in args.recordings]
+    if not (args.quiet or args.json):   # a line even where no progress bar is drawn (no tty)
+        import sys
+        print(f"greybox: estimating {', '.join(args.params)} from {len(recs)} recording(s) "
+              f"({sum(len(r) for r in recs)} samples) ...", file=sys.stderr, flush=True)
     res = estimate(plant, recs, args.params, bounds=bounds,
                    signals=tuple(args.signals), shooting_interval=args.shooting_interval,
                    x0=args.x0, replay=args.replay, substeps=args.substeps,
