@@ -42,9 +42,11 @@ def long_recording(tmp_path_factory) -> Path:
 
 
 def _start(args: list[str]) -> subprocess.Popen:
+    """``python -m workbench ARGS`` in its own process group (as a terminal runs it)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     return subprocess.Popen([sys.executable, "-m", "workbench", *args], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
 
 
 def _children(pid: int) -> list[int]:
@@ -73,10 +75,14 @@ def _wait_inside_cvodes(proc: subprocess.Popen, timeout: float = 60.0) -> None:
     raise AssertionError("CVODES never started")
 
 
-def _stop(proc: subprocess.Popen, sig: int) -> tuple[int, str, str, float]:
-    """Send ``sig``; (exit code, stdout, stderr, seconds until the process ended)."""
+def _stop(proc: subprocess.Popen, sig: int, group: bool = False) -> tuple[int, str, str, float]:
+    """Send ``sig`` (to the whole process group, as Ctrl-C in a terminal does, if
+    ``group``); (exit code, stdout, stderr, seconds until the process ended)."""
     t0 = time.monotonic()
-    proc.send_signal(sig)
+    if group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     return proc.returncode, out, err, time.monotonic() - t0
 
@@ -121,8 +127,12 @@ def test_interrupted_robustness_draw_is_not_a_failed_design(tmp_path):
 
 
 @linux_only
-def test_terminated_robustness_stops_its_workers(tmp_path):
-    # on 8c8e7dd: the pool waited for every queued draw before exiting
+@pytest.mark.parametrize("sig, code, group", [(signal.SIGTERM, 143, False),
+                                              (signal.SIGINT, 130, True)],
+                         ids=["SIGTERM to the parent", "Ctrl-C to the process group"])
+def test_stopped_robustness_stops_its_workers(tmp_path, sig, code, group):
+    # on 8c8e7dd: the pool waited for every queued draw before exiting, its workers
+    # outlived it; with Ctrl-C in a terminal each worker printed a traceback
     out = tmp_path / "mc"
     out.mkdir()
     (out / "robustness.json").write_text("{}\n")          # an older result stays as it was
@@ -130,9 +140,10 @@ def test_terminated_robustness_stops_its_workers(tmp_path):
                    "--out", str(out), "--quiet"])
     _wait_inside_cvodes(proc)
     workers = _children(proc.pid)
-    rc, stdout, err, took = _stop(proc, signal.SIGTERM)
-    assert rc == 143, err
-    assert "terminated" in err and "Traceback" not in err
+    rc, stdout, err, took = _stop(proc, sig, group)
+    assert rc == code, err
+    assert ("terminated" if code == 143 else "interrupted") in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert took < 10.0                                     # 40 draws take ~30 s
     assert _leftovers(out) == ["robustness.json"]
     assert (out / "robustness.json").read_text() == "{}\n"

@@ -285,6 +285,14 @@ def _run_one(i: int, name: str) -> Outcome:
         return Outcome(False, ("run",), math.nan, f"{type(exc).__name__}: {exc}")
 
 
+def _quiet_worker() -> None:
+    """In a forked worker: the parent handles Ctrl-C (a terminal sends it to the whole
+    process group) and stops its workers with SIGTERM, which ends them silently."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _run_jobs(jobs: list[tuple[int, str]], nproc: int, results: dict, bar) -> None:
     """Run the jobs here or in forked workers. On Ctrl-C, SIGTERM or any error the
     queued jobs are cancelled and the workers stopped at once (no waiting for them)."""
@@ -296,7 +304,7 @@ def _run_jobs(jobs: list[tuple[int, str]], nproc: int, results: dict, bar) -> No
         return
     from concurrent.futures import ProcessPoolExecutor, as_completed
     ex = ProcessPoolExecutor(max_workers=min(nproc, len(jobs)),
-                             mp_context=mp.get_context("fork"))
+                             mp_context=mp.get_context("fork"), initializer=_quiet_worker)
     try:
         futs = {ex.submit(_run_one, i, name): (i, name) for i, name in jobs}
         for f in as_completed(futs):
