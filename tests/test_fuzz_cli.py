@@ -143,6 +143,9 @@ def _check_case(argv: list[str], files: dict[str, str]) -> int:
             for f in Path(tmp).rglob("*.json"):
                 json.loads(f.read_text(), parse_constant=lambda c: pytest.fail(
                     f"{f.name} holds {c}: not JSON ({args})"))
+            if "--json" in args and std.getvalue().lstrip().startswith("{"):
+                json.loads(std.getvalue(), parse_constant=lambda c: pytest.fail(
+                    f"--json printed {c}: not JSON ({args})"))
         return code
 
 
