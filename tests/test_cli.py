@@ -325,3 +325,19 @@ def test_robustness_shows_progress_unless_quiet(monkeypatch, capsys):
     assert main(["robustness", str(PLANT), "--draws", "3"]) == 130
     err = capsys.readouterr().err
     assert "robustness: validating" in err and "3 drawn plants" in err
+
+
+def test_non_utf8_plant_file_is_one_line_naming_it(tmp_path, capsys):
+    # issue 15: a plant file saved as Latin-1 (a degree sign in a comment) gave a
+    # UnicodeDecodeError traceback
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes(PLANT.read_bytes().replace(b"\n", b"  # 20 \xb0C\n", 1))
+    assert main(["check", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "latin1.toml" in err and "UTF-8" in err
+
+
+def test_nul_in_an_argument_is_refused(capsys):
+    assert main(["check", "plant\x00.toml"]) == 2
+    assert "NUL" in capsys.readouterr().err

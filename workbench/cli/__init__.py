@@ -87,8 +87,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     0 success, 2 an error the user can fix (one line on stderr), 1 a broken command
     module, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). An interrupted or
-    terminated command writes nothing (its result set is never moved into place), also
-    when the signal arrived inside C code that reported it as an ordinary failure.
+    terminated command that writes through :func:`workbench.output.result_set` writes
+    nothing (its result set is never moved into place), also when the signal arrived
+    inside C code that reported it as an ordinary failure.
 
     Called as the program (``argv`` None), a stopped run ends the process at once with
     130 / 143: a Ctrl-C that hit an extension module's start-up code can leave the
@@ -107,6 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: Sequence[str] | None) -> int:
+    """:func:`main` without the process exit: signals as exceptions, remembered."""
     from ..output import (EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated, interrupted,
                           stop_on_signals)
     name = "workbench"
@@ -173,7 +175,8 @@ def _undecodable(args: argparse.Namespace) -> str | None:
         if isinstance(v, str) and os.path.isfile(v):
             try:
                 with open(v, encoding="utf-8") as fh:
-                    fh.read()
+                    while fh.read(1 << 20):
+                        pass
             except UnicodeDecodeError:
                 return v
             except OSError:
