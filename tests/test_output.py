@@ -233,3 +233,25 @@ def test_rls_tiny_forgetting_is_refused_and_nothing_written(tmp_path, arx_csv, c
     assert list(tmp_path.iterdir()) == []
     assert main(["identify", "rls", str(arx_csv), "--input", "u", "--forgetting", "0.75",
                  "--out", str(out), "--quiet", "--no-plot"]) == 0
+
+
+def test_library_blocks_leave_sigterm_and_custom_handlers_alone():
+    import signal
+    from workbench.output import stop_on_signals
+    term = signal.getsignal(signal.SIGTERM)
+    with stop_on_signals():                      # a library call (simulate, replay, ...)
+        assert signal.getsignal(signal.SIGTERM) is term
+        assert signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+    def mine(signum, frame):
+        pass
+    old = signal.signal(signal.SIGINT, mine)
+    try:
+        with stop_on_signals(sigterm=True):      # the command line
+            assert signal.getsignal(signal.SIGINT) is mine
+            if term is signal.SIG_DFL:           # (a test runner may have its own)
+                assert signal.getsignal(signal.SIGTERM) is not term
+        assert signal.getsignal(signal.SIGTERM) is term
+    finally:
+        signal.signal(signal.SIGINT, old)

@@ -185,18 +185,21 @@ def _handler(signum, frame):  # noqa: ARG001 - signal handler signature
 
 
 @contextlib.contextmanager
-def stop_on_signals() -> Iterator[None]:
-    """Within the block, Ctrl-C (SIGINT) raises ``KeyboardInterrupt`` and SIGTERM
-    :class:`Terminated` in the main thread, and the signal is *remembered*.
+def stop_on_signals(*, sigterm: bool = False) -> Iterator[None]:
+    """Within the block, Ctrl-C (SIGINT) raises ``KeyboardInterrupt`` (and SIGTERM
+    :class:`Terminated` if ``sigterm``) in the main thread, and the signal is
+    *remembered*.
 
     C code that polls for signals (CasADi's CVODES, IDAS and IPOPT interfaces) turns
     the Python exception into its own error: a ``RuntimeError`` such as
     ``CVode returned "CV_RHSFUNC_FAIL"``, or an optimiser that just stops. The memory
     lets :func:`reraise_interrupt` and :func:`result_set` recover the stop, so that an
     interrupted computation is never taken for a failed one. Nested blocks share the
-    outermost one's handlers; outside the main thread the block changes nothing. A
-    signal whose disposition is "ignore" (a background job of a non-interactive shell)
-    stays ignored.
+    outermost one's handlers; outside the main thread the block changes nothing. Only
+    Python's own dispositions are replaced: SIGINT's ``default_int_handler`` and, with
+    ``sigterm`` (the command line), SIGTERM's default. A signal that is ignored (a
+    background job of a non-interactive shell) or that the application handles itself
+    is left alone; so is SIGTERM in library calls (it still ends the process).
     """
     if threading.current_thread() is not threading.main_thread():
         yield                       # signals reach the main thread only
@@ -210,9 +213,10 @@ def stop_on_signals() -> Iterator[None]:
         return
     _RECEIVED.clear()
     old = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        if signal.getsignal(sig) is not signal.SIG_IGN:
-            old[sig] = signal.signal(sig, _handler)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        old[signal.SIGINT] = signal.signal(signal.SIGINT, _handler)
+    if sigterm and signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
+        old[signal.SIGTERM] = signal.signal(signal.SIGTERM, _handler)
     _DEPTH[0] += 1
     try:
         yield
@@ -255,7 +259,7 @@ def reraise_interrupt(exc: BaseException | None = None) -> None:
 def sigterm_as_exception() -> Iterator[None]:
     """Within the block, SIGTERM raises :class:`Terminated` (and Ctrl-C
     ``KeyboardInterrupt``), both remembered: :func:`stop_on_signals`."""
-    with stop_on_signals():
+    with stop_on_signals(sigterm=True):
         yield
 
 

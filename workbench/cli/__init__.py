@@ -113,7 +113,7 @@ def _main(argv: Sequence[str] | None) -> int:
                           stop_on_signals)
     name = "workbench"
     try:
-        with stop_on_signals():
+        with stop_on_signals(sigterm=True):
             try:
                 parser = build_parser()
             except CommandModuleError as exc:
