@@ -29,13 +29,15 @@ import os
 import shutil
 import signal
 import tempfile
+import threading
 from pathlib import Path
 from typing import Iterable, Iterator
 
 from .errors import InputError
 
 __all__ = ["result_set", "check_output_dir", "check_not_input", "Terminated",
-           "sigterm_as_exception", "EXIT_INTERRUPTED", "EXIT_TERMINATED"]
+           "sigterm_as_exception", "stop_on_signals", "interrupted", "reraise_interrupt",
+           "write_json", "strict_json", "EXIT_INTERRUPTED", "EXIT_TERMINATED"]
 
 #: Exit status after Ctrl-C (128 + SIGINT).
 EXIT_INTERRUPTED = 130
@@ -74,6 +76,12 @@ def check_output_dir(out: str | os.PathLike, *, option: str = "--out") -> Path:
         raise InputError(f"{option} {text} lies under {parent}, which is a file, not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"{option} {text}: cannot write in {parent} (permission denied)")
+    try:                        # the real test (root, ACLs, read-only mounts, full quota)
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise InputError(f"{option} {text}: cannot write in {parent} "
+                         f"({exc.strerror or exc})") from None
     return path
 
 
@@ -138,6 +146,7 @@ def result_set(out: str | os.PathLike, *,
     stage = Path(tempfile.mkdtemp(prefix=f".{out_abs.name}.partial-", dir=parent))
     try:
         yield stage
+        reraise_interrupt()             # a stop swallowed by C code: commit nothing
         files = [p for p in stage.rglob("*") if p.is_file()]
         check_not_input([out_abs / p.relative_to(stage) for p in files], inputs)
         if not out_abs.exists():
@@ -159,22 +168,122 @@ def _umask() -> int:
     return mask
 
 
-@contextlib.contextmanager
-def sigterm_as_exception() -> Iterator[None]:
-    """Within the block, SIGTERM raises :class:`Terminated` in the main thread.
+# ---------------------------------------------------------------------- signals
+#: Signals received while :func:`stop_on_signals` is active (cleared on entering it).
+_RECEIVED: list[int] = []
+#: Nesting depth of :func:`stop_on_signals` (the handlers are installed once, outermost).
+_DEPTH = [0]
 
-    Used by the CLI around a command, so that a terminated run unwinds like Ctrl-C
-    (staged output removed) and exits with :data:`EXIT_TERMINATED`.
+
+def _signal_exception(signum: int) -> BaseException:
+    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def _handler(signum, frame):  # noqa: ARG001 - signal handler signature
+    _RECEIVED.append(signum)
+    raise _signal_exception(signum)
+
+
+@contextlib.contextmanager
+def stop_on_signals(*, sigterm: bool = False) -> Iterator[None]:
+    """Within the block, Ctrl-C (SIGINT) raises ``KeyboardInterrupt`` (and SIGTERM
+    :class:`Terminated` if ``sigterm``) in the main thread, and the signal is
+    *remembered*.
+
+    C code that polls for signals (CasADi's CVODES, IDAS and IPOPT interfaces) turns
+    the Python exception into its own error: a ``RuntimeError`` such as
+    ``CVode returned "CV_RHSFUNC_FAIL"``, or an optimiser that just stops. The memory
+    lets :func:`reraise_interrupt` and :func:`result_set` recover the stop, so that an
+    interrupted computation is never taken for a failed one. Nested blocks share the
+    outermost one's handlers; outside the main thread the block changes nothing. Only
+    Python's own dispositions are replaced: SIGINT's ``default_int_handler`` and, with
+    ``sigterm`` (the command line), SIGTERM's default. A signal that is ignored (a
+    background job of a non-interactive shell) or that the application handles itself
+    is left alone; so is SIGTERM in library calls (it still ends the process).
     """
-    def _raise(signum, frame):  # noqa: ARG001 - signal handler signature
-        raise Terminated()
-    try:
-        old = signal.signal(signal.SIGTERM, _raise)
-    except ValueError:          # not the main thread: leave the default handler
-        yield
+    if threading.current_thread() is not threading.main_thread():
+        yield                       # signals reach the main thread only
         return
+    if _DEPTH[0] > 0:
+        _DEPTH[0] += 1
+        try:
+            yield
+        finally:
+            _DEPTH[0] -= 1
+        return
+    _RECEIVED.clear()
+    old = {}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        old[signal.SIGINT] = signal.signal(signal.SIGINT, _handler)
+    if sigterm and signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
+        old[signal.SIGTERM] = signal.signal(signal.SIGTERM, _handler)
+    _DEPTH[0] += 1
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, old)
+        _DEPTH[0] -= 1
+        for sig, h in old.items():
+            signal.signal(sig, h)
+        _RECEIVED.clear()           # outside a block nothing is remembered
 
+
+def interrupted() -> int | None:
+    """The signal (``signal.SIGINT`` or ``SIGTERM``) received within the current
+    :func:`stop_on_signals` block, or None (always None outside a block)."""
+    return _RECEIVED[0] if _RECEIVED and _DEPTH[0] > 0 else None
+
+
+def reraise_interrupt(exc: BaseException | None = None) -> None:
+    """Raise ``KeyboardInterrupt`` / :class:`Terminated` if a stop signal arrived.
+
+    Call it first in every ``except`` clause that catches errors of a CasADi call (or
+    any broad ``except Exception``): a Ctrl-C polled by CasADi comes back as an
+    ordinary error, which must not be handled as a failed integration, a failed
+    design or a reason to fall back to another method. Returns normally (and the
+    caller handles ``exc``) when no signal arrived.
+
+    >>> try:
+    ...     raise RuntimeError("CVode returned CV_RHSFUNC_FAIL")
+    ... except RuntimeError as exc:
+    ...     reraise_interrupt(exc)          # no signal: nothing happens
+    ...     handled = True
+    >>> handled
+    True
+    """
+    sig = interrupted()
+    if sig is not None:
+        raise _signal_exception(sig) from exc
+
+
+@contextlib.contextmanager
+def sigterm_as_exception() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` (and Ctrl-C
+    ``KeyboardInterrupt``), both remembered: :func:`stop_on_signals`."""
+    with stop_on_signals(sigterm=True):
+        yield
+
+
+def write_json(path: str | os.PathLike, value, *, indent: int | None = 2) -> None:
+    """Write ``value`` as strict JSON: NaN and inf become null (JSON has no such
+    tokens; strict readers reject them), numpy scalars and arrays plain numbers/lists.
+
+    The file is written whole or not at all (a temporary file renamed into place).
+    """
+    import json
+    from .params import atomic_write_text
+    atomic_write_text(path, json.dumps(strict_json(value), indent=indent, allow_nan=False)
+                      + "\n")
+
+
+def strict_json(value):
+    """``value`` with non-finite floats as None and numpy values as Python ones, recursively."""
+    import math
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(v) for v in value]
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        return strict_json(value.tolist())          # numpy scalar or array
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

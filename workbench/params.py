@@ -46,7 +46,6 @@ from typing import Any, Mapping
 import tomli_w
 
 from .errors import InputError
-from .physics.valve import UNDERLAP_LAWS
 
 __all__ = [
     "Key",
@@ -605,6 +604,7 @@ def _check_underlap_law(values: Mapping[str, Any], law: str, source: str) -> Non
     (the input-affine law's underlap leak is the linear one, see
     :func:`workbench.physics.valve.affine_port_flows`)."""
     under = values.get("valve.underlap_law", "linear")
+    from .physics.valve import UNDERLAP_LAWS    # lazy: casadi not needed to parse
     if under not in UNDERLAP_LAWS:
         hint = difflib.get_close_matches(under, UNDERLAP_LAWS, 1)
         raise InputError(f"expected one of {', '.join(repr(v) for v in UNDERLAP_LAWS)}, "

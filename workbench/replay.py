@@ -44,6 +44,7 @@ from typing import Any, Protocol, Sequence
 import numpy as np
 
 from .errors import InputError, WorkbenchError
+from .output import reraise_interrupt, stop_on_signals
 
 __all__ = ["Replay", "replay", "run", "initial_state", "is_closed", "ClosedLoop", "OpenLoop",
            "Fallback", "Strategy", "SIMULATED_COLUMNS"]
@@ -138,7 +139,8 @@ class Fallback:
     def __call__(self, plant, recording, x0, params=None, progress=False):
         try:
             return self.first(plant, recording, x0, params, progress)
-        except WorkbenchError:
+        except WorkbenchError as exc:
+            reraise_interrupt(exc)          # an interrupted first try is no reason to fall back
             return self.then(plant, recording, x0, params, progress)
 
 
@@ -165,7 +167,8 @@ def run(plant, recording, strategy: Strategy, x0: np.ndarray | None = None,
     workbench.simulate.Trajectory (or what the strategy returns)
     """
     x0 = initial_state(plant, recording) if x0 is None else np.asarray(x0, dtype=float)
-    return strategy(plant, recording, x0, params, progress)
+    with stop_on_signals():             # a Ctrl-C inside CasADi stops, never falls back
+        return strategy(plant, recording, x0, params, progress)
 
 
 def initial_state(plant, recording, u0: float | None = None, p_a: float | None = None,

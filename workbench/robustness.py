@@ -25,12 +25,15 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
 from .errors import InputError
-from .plant import Plant
+from .output import reraise_interrupt, stop_on_signals
+
+if TYPE_CHECKING:                   # imported lazily: `workbench --help` stays fast
+    from .plant import Plant
 
 __all__ = ["Uncertainty", "DEFAULT_UNCERTAINTY", "PAPER_002_UNCERTAINTY", "Outcome",
            "RobustnessResult", "draw_plants", "monte_carlo", "validation_outcome"]
@@ -271,13 +274,52 @@ def _run_one(i: int, name: str) -> Outcome:
     except InputError:
         raise
     except Exception as exc:          # a design that cannot be built on this draw fails it
+        reraise_interrupt(exc)        # ... but an interrupted one is not a result
         return Outcome(False, ("design",), math.nan, f"{type(exc).__name__}: {exc}")
     try:
         return judge(plants[i], controller)
     except InputError:
         raise
     except Exception as exc:          # a run the judge could not finish fails the draw
+        reraise_interrupt(exc)        # ... but an interrupted one is not a result
         return Outcome(False, ("run",), math.nan, f"{type(exc).__name__}: {exc}")
+
+
+def _quiet_worker() -> None:
+    """In a forked worker: the parent handles Ctrl-C (a terminal sends it to the whole
+    process group) and stops its workers with SIGTERM, which ends them silently."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _run_jobs(jobs: list[tuple[int, str]], nproc: int, results: dict, bar) -> None:
+    """Run the jobs here or in forked workers. On Ctrl-C, SIGTERM or any error the
+    queued jobs are cancelled and the workers stopped at once (no waiting for them)."""
+    import multiprocessing as mp
+    if not (nproc > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods()):
+        for job in jobs:
+            results[job] = _run_one(*job)
+            bar.update()
+        return
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    ex = ProcessPoolExecutor(max_workers=min(nproc, len(jobs)),
+                             mp_context=mp.get_context("fork"), initializer=_quiet_worker)
+    try:
+        futs = {ex.submit(_run_one, i, name): (i, name) for i, name in jobs}
+        for f in as_completed(futs):
+            results[futs[f]] = f.result()
+            bar.update()
+    except BaseException:
+        procs = list((getattr(ex, "_processes", None) or {}).values())
+        ex.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            if proc.is_alive():
+                proc.terminate()
+        for proc in procs:
+            proc.join(timeout=5)
+        raise
+    ex.shutdown(wait=True)
 
 
 def monte_carlo(plant: Plant, controllers: Mapping[str, Callable[[Plant], object]], n: int = 20,
@@ -315,22 +357,12 @@ def monte_carlo(plant: Plant, controllers: Mapping[str, Callable[[Plant], object
     jobs = [(i, name) for i in range(n) for name in names]
     results: dict[tuple[int, str], Outcome] = {}
     nproc = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
-    bar = tqdm(total=len(jobs), desc="robustness", disable=not progress, leave=False)
+    bar = tqdm(total=len(jobs), desc="robustness", leave=False,
+               disable=None if progress is None else not progress)   # None: on a terminal
     _JOBS.update(plants=plants, controllers=dict(controllers), judge=judge)
     try:
-        import multiprocessing as mp
-        if nproc > 1 and len(jobs) > 1 and "fork" in mp.get_all_start_methods():
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-            with ProcessPoolExecutor(max_workers=min(nproc, len(jobs)),
-                                     mp_context=mp.get_context("fork")) as ex:
-                futs = {ex.submit(_run_one, i, name): (i, name) for i, name in jobs}
-                for f in as_completed(futs):
-                    results[futs[f]] = f.result()
-                    bar.update()
-        else:
-            for job in jobs:
-                results[job] = _run_one(*job)
-                bar.update()
+        with stop_on_signals():
+            _run_jobs(jobs, nproc, results, bar)
     finally:
         _JOBS.clear()
         bar.close()

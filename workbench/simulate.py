@@ -27,6 +27,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import InputError, WorkbenchError
+from .output import reraise_interrupt, stop_on_signals
 from .plant import Plant
 
 __all__ = [
@@ -155,11 +156,13 @@ class Simulator:
 
     def step(self, state: np.ndarray, u: float, duration: float, m: int = 1) -> np.ndarray:
         """States at ``m`` equally spaced instants over ``duration`` s (last = end), (m, nx)."""
+        reraise_interrupt()         # a Ctrl-C swallowed earlier (e.g. by IPOPT): stop now
         F = self._integrator(m)
         pv = np.concatenate(([duration, u], self.params))
         try:
             res = F(x0=state / self.scale, p=pv)
         except RuntimeError as exc:
+            reraise_interrupt(exc)  # CVODES reports a Ctrl-C as a failed right-hand side
             raise WorkbenchError(f"integration failed over a {duration:g} s interval with "
                                  f"u = {u:g} V: {str(exc).splitlines()[0]}") from None
         return (np.asarray(res["xf"]).T) * self.scale
@@ -227,7 +230,7 @@ def open_loop(plant: Plant, t: Sequence[float], u: Sequence[float],
     states = np.empty((len(t), len(state)))
     states[0] = state
     dts = np.diff(t)
-    with _progress(len(t) - 1, "simulate", progress) as bar:
+    with stop_on_signals(), _progress(len(t) - 1, "simulate", progress) as bar:
         for k in range(len(t) - 1):
             state = sim.step(state, u[k], dts[k])[-1]
             states[k + 1] = state
@@ -298,7 +301,7 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
     sampler = _Sampler(plant, controller, reference, state, position_resolution,
                        command_resolution, delay_samples)
     run = _run_uniform if grid.per else _run_events
-    with _progress(len(grid.events) - 1, "closed loop", progress) as bar:
+    with stop_on_signals(), _progress(len(grid.events) - 1, "closed loop", progress) as bar:
         states, u_hist, r_hist = run(grid, sim, sampler, reference, state, bar)
     states, u_hist, r_hist = states[grid.out_idx], u_hist[grid.out_idx], r_hist[grid.out_idx]
     outs = sim.outputs(states, u_hist)

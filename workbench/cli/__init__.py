@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 import traceback
 from typing import Sequence
@@ -50,6 +52,8 @@ def _register(group: str, subparsers) -> None:
     try:
         importlib.import_module(module_name).register(subparsers)
     except Exception as exc:            # any failure: a broken module, not a missing command
+        from ..output import reraise_interrupt
+        reraise_interrupt(exc)          # numpy turns a Ctrl-C in its import into ImportError
         cause = "".join(traceback.format_exception(exc)).rstrip()
         raise CommandModuleError(f"the command module {module_name} cannot be loaded "
                                  f"({type(exc).__name__}: {exc}); its commands are "
@@ -81,24 +85,107 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``workbench`` with ``argv`` (default ``sys.argv[1:]``); return the exit code.
 
-    0 success, 2 an error the user can fix (message on stderr), 1 a broken command
-    module, 130 interrupted.
+    0 success, 2 an error the user can fix (one line on stderr), 1 a broken command
+    module, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). An interrupted or
+    terminated command that writes through :func:`workbench.output.result_set` writes
+    nothing (its result set is never moved into place), also when the signal arrived
+    inside C code that reported it as an ordinary failure.
+
+    Called as the program (``argv`` None), a stopped run ends the process at once with
+    130 / 143: a Ctrl-C that hit an extension module's start-up code can leave the
+    interpreter set to re-raise SIGINT at exit (exit status -2 instead of 130).
     """
     try:
-        parser = build_parser()
-    except CommandModuleError as exc:
-        print(f"workbench: error: {exc}", file=sys.stderr)
-        return EXIT_BROKEN
-    args = parser.parse_args(argv)
+        code = _main(argv)
+    except KeyboardInterrupt:           # before the signal handlers were installed
+        print("workbench: interrupted (Ctrl-C)", file=sys.stderr)
+        code = 130
+    if argv is None and code in (130, 143):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    """:func:`main` without the process exit: signals as exceptions, remembered."""
+    from ..output import (EXIT_INTERRUPTED, EXIT_TERMINATED, Terminated, interrupted,
+                          stop_on_signals)
+    name = "workbench"
+    try:
+        with stop_on_signals(sigterm=True):
+            try:
+                parser = build_parser()
+            except CommandModuleError as exc:
+                print(f"workbench: error: {exc}", file=sys.stderr)
+                return EXIT_BROKEN
+            try:
+                _refuse_nul(sys.argv[1:] if argv is None else argv)
+                args = parser.parse_args(argv)
+            except SystemExit as exc:       # --help (0) or a bad argument (2, one line)
+                if isinstance(exc.code, str):
+                    print(exc.code, file=sys.stderr)
+                return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+            name = " ".join(["workbench", args.command]
+                            + ([args.method] if getattr(args, "method", None) else []))
+            try:
+                code = _run(args, name)
+            except Exception:
+                if interrupted() is None:        # a bug: its traceback is the report
+                    raise
+                code = None                      # e.g. SystemError from a C call it hit
+            if interrupted() is not None:        # swallowed by C code, surfaced here
+                raise Terminated() if interrupted() == signal.SIGTERM else KeyboardInterrupt()
+            return code
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted (Ctrl-C)", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Terminated:
+        print(f"{name}: terminated (SIGTERM)", file=sys.stderr)
+        return EXIT_TERMINATED
+
+
+def _run(args: argparse.Namespace, name: str) -> int:
+    """Call the command's handler; a user's error is one line on stderr, exit 2."""
     try:
         return int(args.func(args) or 0)
     except WorkbenchError as exc:
-        print(f"workbench {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:          # output piped into e.g. `head`: not an error
-        import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:           # a full disk, a vanished folder: no traceback
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"{name}: error: {exc.strerror or exc}{where}", file=sys.stderr)
+        return 2
+    except UnicodeDecodeError as exc:  # a loader that read text without saying which file
+        print(f"{name}: error: {_undecodable(args) or 'an input file'} is not UTF-8 text "
+              f"(byte 0x{exc.object[exc.start]:02x} at offset {exc.start}); save it as "
+              f"UTF-8", file=sys.stderr)
+        return 2
+
+
+def _undecodable(args: argparse.Namespace) -> str | None:
+    """The first file named in ``args`` that is not UTF-8 text, or None."""
+    values = []
+    for v in vars(args).values():
+        values += v if isinstance(v, list) else [v]
+    for v in values:
+        if isinstance(v, str) and os.path.isfile(v):
+            try:
+                with open(v, encoding="utf-8") as fh:
+                    while fh.read(1 << 20):
+                        pass
+            except UnicodeDecodeError:
+                return v
+            except OSError:
+                continue
+    return None
+
+
+def _refuse_nul(argv: Sequence[str]) -> None:
+    """A NUL character cannot be in a file name or a number: refuse it up front."""
+    for a in argv:
+        if "\x00" in a:
+            raise SystemExit(f"workbench: error: argument {a!r} contains a NUL character")

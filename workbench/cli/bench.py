@@ -32,7 +32,8 @@ def _bench(args: argparse.Namespace) -> int:
     from ..bench import run
     result = run(args.name, quick=args.quick)
     if args.json:
-        print(json.dumps(result, indent=2))
+        from ..output import strict_json
+        print(json.dumps(strict_json(result), indent=2))
     else:
         for k, v in result.items():
             print(f"{k}: {v}")

@@ -6,6 +6,8 @@ import argparse
 import json
 import sys
 
+from .common import positive_int
+
 __all__ = ["register"]
 
 DESCRIPTION = (
@@ -38,7 +40,7 @@ def register(subparsers) -> None:
                    help="candidates to test (default: all effects and parameter_error)")
     p.add_argument("--mode", choices=("auto", "closed", "open"), default="auto",
                    help="replay mode (default auto: closed loop when r and [controller] exist)")
-    p.add_argument("--workers", type=int, metavar="N",
+    p.add_argument("--workers", type=positive_int, metavar="N",
                    help="processes for the candidate refits (default: all cores)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html/.pdf")
     p.set_defaults(func=_diagnose)

@@ -6,9 +6,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
+from .common import nonnegative_int, positive_int, prepare_output
+
 __all__ = ["register"]
+
+#: Files ``--out`` receives.
+ROBUSTNESS_FILES = ("robustness.csv", "robustness.json", "robustness.png")
 
 DESCRIPTION = ("Monte Carlo robustness of the plant file's [controller]: validate it "
                "(workbench.validate, standard profile) on N plants drawn from uncertainty "
@@ -30,14 +36,17 @@ def register(subparsers) -> None:
                                      "robustness designs/plants/situm_rodless.toml --draws 20 "
                                      "--ranges paper002 --out mc/")
     p.add_argument("plant", metavar="PLANT.toml", help="plant file with a [controller]")
-    p.add_argument("--draws", type=int, default=20, metavar="N", help="drawn plants (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--draws", type=positive_int, default=20, metavar="N",
+                   help="drawn plants (default 20)")
+    p.add_argument("--seed", type=nonnegative_int, default=0,
+                   help="random seed, an integer >= 0 (default 0)")
     p.add_argument("--ranges", choices=tuple(UNCERTAINTY_SETS), default="usual",
                    help="built-in ranges (default usual)")
     p.add_argument("--vary", action="append", metavar="KEY=LOW:HIGH[:MODE]",
                    help="own range instead of --ranges (repeatable); MODE factor, offset, "
                         "value or flow")
-    p.add_argument("--workers", type=int, metavar="N", help="processes (default: all cores)")
+    p.add_argument("--workers", type=positive_int, metavar="N",
+                   help="processes (default: all cores)")
     p.add_argument("--out", metavar="DIR", help="write robustness.csv, .json and .png here")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -46,14 +55,13 @@ def register(subparsers) -> None:
 
 def _robustness(args: argparse.Namespace) -> int:
     """Run the sub-command (user errors raise WorkbenchError: exit 2 in main)."""
+    out = (prepare_output(args.out, ROBUSTNESS_FILES, [args.plant])
+           if args.out is not None else None)
     from .. import robustness as rb
     from ..controllers import from_plant
     from ..errors import InputError
+    from ..output import strict_json
     from ..plant import Plant
-    if args.draws < 1:
-        raise InputError(f"--draws must be >= 1, got {args.draws}")
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers must be >= 1, got {args.workers}")
     plant = Plant.from_toml(args.plant)
     if not plant.params.has_controller:
         raise InputError(f"{args.plant} has no [controller] section to validate")
@@ -61,32 +69,37 @@ def _robustness(args: argparse.Namespace) -> int:
            else rb.UNCERTAINTY_SETS[args.ranges])
     controller = from_plant(plant)
     name = getattr(controller, "kind", "controller")
+    show = not (args.quiet or args.json)
+    if show:                        # a line even where no progress bar is drawn (no tty)
+        print(f"robustness: validating {name} on {args.draws} drawn plants "
+              f"({args.workers or 'all'} worker(s)) ...", file=sys.stderr, flush=True)
     res = rb.monte_carlo(plant, {name: lambda p: controller}, n=args.draws, seed=args.seed,
                          uncertainty=unc, workers=args.workers,
-                         progress=False if (args.quiet or args.json) else None)
-    if args.out:
-        _write(Path(args.out), res, plant, args.plant)
+                         progress=None if show else False)
+    if out is not None:
+        _write(out, res, plant, args.plant)
     if args.json:
         d = res.to_dict()
         d["controllers"][name]["pass_interval"] = list(res.pass_interval(name))
-        print(json.dumps({"plant": str(args.plant), **d}, indent=1))
+        print(json.dumps(strict_json({"plant": str(args.plant), **d}), indent=1))
         return 0
     _print_table(args, res, unc, name)
     return 0
 
 
 def _write(out: Path, res, plant, plant_file) -> None:
-    """robustness.csv, robustness.json and robustness.png in ``out``."""
+    """robustness.csv, robustness.json and robustness.png in ``out``, all or none."""
     from .. import plots
+    from ..output import result_set, write_json
     from ..params import atomic_write_text
     from ..robustness import figure_axes
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "robustness.csv", res.to_csv_text(plant))
-    atomic_write_text(out / "robustness.json", json.dumps(
-        {"plant": str(plant_file), **res.to_dict()}, indent=1) + "\n")
-    (x, xl), (y, yl) = figure_axes(res, plant)
-    fig = plots.robustness_figure(res, x, y, xl, yl, title=f"Monte Carlo: {plant_file}")
-    plots.save_figure(fig, out / "robustness.png")
+    with result_set(out, inputs=[plant_file]) as stage:
+        atomic_write_text(stage / "robustness.csv", res.to_csv_text(plant))
+        write_json(stage / "robustness.json", {"plant": str(plant_file), **res.to_dict()},
+                   indent=1)
+        (x, xl), (y, yl) = figure_axes(res, plant)
+        fig = plots.robustness_figure(res, x, y, xl, yl, title=f"Monte Carlo: {plant_file}")
+        plots.save_figure(fig, stage / "robustness.png")
 
 
 def _print_table(args: argparse.Namespace, res, unc, name: str) -> None:

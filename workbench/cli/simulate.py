@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 from pathlib import Path
 
-from .common import EPILOG
+from .common import EPILOG, prepare_output
 
 __all__ = ["register"]
+
+#: Files ``--out`` receives.
+SIMULATE_FILES = ("simulation.csv", "fit.json", "simulation.png")
 
 
 def register(subparsers) -> None:
@@ -34,26 +37,36 @@ def register(subparsers) -> None:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from ..params import atomic_write_text
+    out_dir = prepare_output(args.out, SIMULATE_FILES, [args.plant, args.recording])
     from ..plant import Plant
     from ..recording import Recording, fit_signals
     from ..replay import replay
     plant = Plant.from_toml(args.plant)
     rec = Recording.load(args.recording)
-    out_dir = Path(args.out)
+    if not args.quiet:              # a line even where no progress bar is drawn (no tty)
+        print(f"simulate: replaying {len(rec)} samples ({rec.duration:.3g} s) of "
+              f"{args.recording} ...", file=sys.stderr, flush=True)
     result = replay(plant, rec, mode=args.mode, progress=None if not args.quiet else False)
     sim_rec = result.recording
     fits = fit_signals(rec, sim_rec, names=[n for n in ("x", "p_a", "p_b") if n in rec])
-    out_dir.mkdir(parents=True, exist_ok=True)
-    sim_rec.to_csv(out_dir / "simulation.csv")
-    atomic_write_text(out_dir / "fit.json", json.dumps(fits, indent=2) + "\n")
     mode = result.mode.replace("_", " ")
-    if not args.no_plot:
-        from ..plots import replay_figure
-        replay_figure(rec, sim_rec, fits, out_dir / "simulation.png",
-                      title=f"{plant.name}: {mode} replay of {Path(args.recording).name}")
+    _write(args, out_dir, rec, sim_rec, fits, f"{plant.name}: {mode} replay of "
+                                               f"{Path(args.recording).name}")
     print(f"{mode} replay of {args.recording} ({len(rec)} samples, {rec.duration:.3g} s)")
     for k, v in fits.items():
-        print(f"  fit {k:<4} {v:7.2f} %")
+        print(f"  fit {k:<4} " + (f"{v:7.2f} %" if v == v else "    n/a (the recorded "
+                                   "signal is constant: NRMSE undefined)"))
     print(f"wrote {out_dir / 'simulation.csv'} and {out_dir / 'fit.json'}")
     return 0
+
+
+def _write(args: argparse.Namespace, out_dir: Path, rec, sim_rec, fits, title: str) -> None:
+    """simulation.csv, fit.json (strict JSON: an undefined fit is null) and
+    simulation.png, all or none."""
+    from ..output import result_set, write_json
+    with result_set(out_dir, inputs=[args.plant, args.recording]) as stage:
+        sim_rec.to_csv(stage / "simulation.csv")
+        write_json(stage / "fit.json", fits)
+        if not args.no_plot:
+            from ..plots import replay_figure
+            replay_figure(rec, sim_rec, fits, stage / "simulation.png", title=title)

@@ -8,9 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import EPILOG
+from .common import EPILOG, finite_float, nonnegative_int, positive_int, prepare_output
 
 __all__ = ["register"]
+
+#: Files ``map --out`` receives.
+MAP_FILES = ("map.csv", "map.json", "map.png")
 
 LIMITS_DESCRIPTION = (
     "Upper limits on the loop gain K0 = kp Kv (1/s) of the sampled P position loop "
@@ -45,17 +48,17 @@ def _register_limits(subparsers) -> None:
                                description=LIMITS_DESCRIPTION, epilog=EPILOG)
     li.add_argument("plant", metavar="PLANT.toml", nargs="?", default=None,
                     help="plant file (optional: else give --w0, --zeta, --sample-time)")
-    li.add_argument("--x", type=float, metavar="X", help="piston position, m (with PLANT.toml)")
-    li.add_argument("--w0", type=float, metavar="W0", help="natural frequency, rad/s (model)")
-    li.add_argument("--zeta", type=float, metavar="ZETA", help="damping ratio, - (model)")
-    li.add_argument("--sample-time", type=float, metavar="T",
+    li.add_argument("--x", type=finite_float, metavar="X", help="piston position, m (with PLANT.toml)")
+    li.add_argument("--w0", type=finite_float, metavar="W0", help="natural frequency, rad/s (model)")
+    li.add_argument("--zeta", type=finite_float, metavar="ZETA", help="damping ratio, - (model)")
+    li.add_argument("--sample-time", type=finite_float, metavar="T",
                     help="sample time, s (model: required; plant: default controller.sample_time)")
-    li.add_argument("--k0", type=float, metavar="K0",
+    li.add_argument("--k0", type=finite_float, metavar="K0",
                     help="loop gain kp Kv, 1/s, for the margins "
                          "(plant: default controller.kp * Kv)")
-    li.add_argument("--kp", type=float, metavar="KP",
+    li.add_argument("--kp", type=finite_float, metavar="KP",
                     help="controller gain, V/m, instead of --k0 (model: needs --kv)")
-    li.add_argument("--kv", type=float, metavar="KV",
+    li.add_argument("--kv", type=finite_float, metavar="KV",
                     help="velocity gain, m/(V s) (model only): shows the limits as kp = K0/Kv")
     li.add_argument("--json", action="store_true",
                     help="print JSON: k0, continuous, pct, sampled, sampled_delay (1/s), "
@@ -74,18 +77,18 @@ def _register_map(subparsers) -> None:
     mp.add_argument("--y-axis", required=True, metavar="NAME=START:STOP[:NUM]",
                     help="vertical axis")
     mp.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
-    mp.add_argument("--position", type=float, metavar="X",
+    mp.add_argument("--position", type=finite_float, metavar="X",
                     help="piston position of the equilibrium, m (default mid-stroke)")
-    mp.add_argument("--kp", type=float, help="controller gain, V/m (default: plant file)")
-    mp.add_argument("--kd", type=float, help="derivative gain, V s/m (default: plant file)")
-    mp.add_argument("--ki", type=float, help="integral gain, V/(m s) (default: plant file)")
-    mp.add_argument("--sample-time", dest="sample_time", type=float, metavar="T",
+    mp.add_argument("--kp", type=finite_float, help="controller gain, V/m (default: plant file)")
+    mp.add_argument("--kd", type=finite_float, help="derivative gain, V s/m (default: plant file)")
+    mp.add_argument("--ki", type=finite_float, help="integral gain, V/(m s) (default: plant file)")
+    mp.add_argument("--sample-time", dest="sample_time", type=finite_float, metavar="T",
                     help="sample time, s (default: plant file)")
-    mp.add_argument("--delay", type=int, default=0, metavar="N",
+    mp.add_argument("--delay", type=nonnegative_int, default=0, metavar="N",
                     help="samples of computation delay (default 0)")
     mp.add_argument("--scheduler", metavar="ADDRESS",
                     help="Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: local cores)")
-    mp.add_argument("--workers", type=int, metavar="N",
+    mp.add_argument("--workers", type=positive_int, metavar="N",
                     help="local worker processes (default: all cores)")
     mp.add_argument("--json", action="store_true", help="print a JSON summary")
     mp.add_argument("--no-plot", action="store_true", help="do not write map.png")
@@ -151,6 +154,8 @@ def _limits_of_model(args: argparse.Namespace):
         raise InputError("give PLANT.toml with --x, or the model --w0, --zeta and "
                          f"--sample-time (missing: {', '.join(missing)})")
     k0 = args.k0
+    if args.kv is not None and not (np.isfinite(args.kv) and args.kv > 0):
+        raise InputError(f"--kv must be a positive velocity gain, m/(V s), got {args.kv:g}")
     if args.kp is not None:
         if args.kv is None:
             raise InputError("--kp (V/m) needs --kv (m/(V s)) to form K0 = kp Kv; "
@@ -198,8 +203,7 @@ def _print_limits(lim, where: str, notes: list[str]) -> None:
 
 # ---------------------------------------------------------------------- map
 def _map(args: argparse.Namespace) -> int:
-    from .. import plots
-    from ..params import atomic_write_text
+    out = prepare_output(args.out, MAP_FILES, [args.plant])
     from ..plant import Plant
     from ..stability import maps
     from ..stability.loop import map_controller
@@ -207,20 +211,20 @@ def _map(args: argparse.Namespace) -> int:
     xa, ya = maps.parse_axis(args.x_axis), maps.parse_axis(args.y_axis)
     ctrl = map_controller(plant, {xa.name, ya.name}, kp=args.kp, kd=args.kd, ki=args.ki,
                           sample_time=args.sample_time)
+    if not args.quiet:              # a line even where no progress bar is drawn (no tty)
+        import sys
+        print(f"map: {len(xa)} x {len(ya)} = {len(xa) * len(ya)} points ...", file=sys.stderr,
+              flush=True)
     smap = maps.stability_map(plant, xa, ya, position=args.position, controller=ctrl,
                               delay_samples=args.delay, scheduler=args.scheduler,
                               workers=args.workers, progress=not args.quiet and None)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    smap.to_csv(out / "map.csv")
     summary = {k: v for k, v in smap.to_dict().items() if k != "rho"}
     summary["files"] = {"csv": str(out / "map.csv"), "json": str(out / "map.json"),
                         "png": str(out / "map.png")}
-    atomic_write_text(out / "map.json", json.dumps(smap.to_dict(), indent=1) + "\n")
-    if not args.no_plot:
-        plots.save_figure(plots.stability_map_figure(smap), out / "map.png")
+    _write_map(args, out, smap)
     if args.json:
-        print(json.dumps(summary, indent=2))
+        from ..output import strict_json
+        print(json.dumps(strict_json(summary), indent=2))
         return 0
     rho = smap.rho
     print(f"stability map {len(xa)} x {len(ya)} = {rho.size} points in {smap.elapsed_s:.2f} s "
@@ -234,3 +238,14 @@ def _map(args: argparse.Namespace) -> int:
     print(f"  wrote {out / 'map.csv'}, {out / 'map.json'}"
           + ("" if args.no_plot else f", {out / 'map.png'}"))
     return 0
+
+
+def _write_map(args: argparse.Namespace, out: Path, smap) -> None:
+    """map.csv, map.json (and map.png), all or none."""
+    from .. import plots
+    from ..output import result_set, write_json
+    with result_set(out, inputs=[args.plant]) as stage:
+        smap.to_csv(stage / "map.csv")
+        write_json(stage / "map.json", smap.to_dict(), indent=1)
+        if not args.no_plot:
+            plots.save_figure(plots.stability_map_figure(smap), stage / "map.png")

@@ -9,13 +9,23 @@ CasADi plant from recordings).
 The ``workbench identify`` command line is :mod:`workbench.cli.identify`.
 """
 
-from .arx import ArxModel, ArxValidation, OrderSelection, fit_arx, select_order
-from .arx import validate as validate_arx
-from .excitation import aprbs, as_reference, prbs
-from .grey_box import GreyBoxResult, estimate
-from .rls import ForgettingChoice, RlsResult, choose_forgetting, rls
-from .valve import (AffineTableFit, PolynomialValveFit, ValveTable, fit_affine,
-                    fit_polynomial, generate_valve_table, load_valve_table, select_degrees)
+from __future__ import annotations
+
+import importlib
+
+#: Public names, imported on first use from their sub-package (the command line's
+#: ``--help`` must not load SciPy and CasADi): name -> (sub-module, attribute).
+_NAMES = {
+    **{n: ("arx", n) for n in ("ArxModel", "ArxValidation", "OrderSelection", "fit_arx",
+                               "select_order")},
+    "validate_arx": ("arx", "validate"),
+    **{n: ("excitation", n) for n in ("aprbs", "as_reference", "prbs")},
+    **{n: ("grey_box", n) for n in ("GreyBoxResult", "estimate")},
+    **{n: ("rls", n) for n in ("ForgettingChoice", "RlsResult", "choose_forgetting", "rls")},
+    **{n: ("valve", n) for n in ("AffineTableFit", "PolynomialValveFit", "ValveTable",
+                                 "fit_affine", "fit_polynomial", "generate_valve_table",
+                                 "load_valve_table", "select_degrees")},
+}
 
 __all__ = [
     "ArxModel", "ArxValidation", "OrderSelection", "fit_arx", "select_order", "validate_arx",
@@ -25,3 +35,12 @@ __all__ = [
     "generate_valve_table", "fit_polynomial", "fit_affine", "select_degrees",
     "GreyBoxResult", "estimate",
 ]
+
+
+def __getattr__(name: str):
+    if name in _NAMES:
+        module, attr = _NAMES[name]
+        value = getattr(importlib.import_module(f".{module}", __name__), attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -8,14 +8,20 @@ import math
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
+from typing import TYPE_CHECKING
 
 from ...errors import InputError
-from ...identify.arx import CRITERIA, ArxModel, ArxValidation, fit_arx, select_order, validate
-from ...identify.arx.checks import complex_pairs as _pairs, finite_or_none as _num
-from ...params import atomic_write_text
+from ..common import nonnegative_int, positive_int, prepare_output
+
+if TYPE_CHECKING:                   # imported in the handler: `--help` stays fast
+    from ...identify.arx import ArxModel, ArxValidation
 
 __all__ = ["add_arx"]
+
+#: Order selection criteria (:data:`workbench.identify.arx.CRITERIA`; a test keeps them equal).
+CRITERIA = ("aic", "bic", "fpe", "loss", "fit")
+#: Files ``--out`` receives.
+ARX_FILES = ("arx.json", "residuals.png", "validation.png")
 
 
 def _int_range(text: str) -> range:
@@ -29,6 +35,8 @@ def _int_range(text: str) -> range:
         raise argparse.ArgumentTypeError(f"expected N or LO:HI, got {text!r}") from None
     if hi < lo:
         raise argparse.ArgumentTypeError(f"empty range {text!r}")
+    if lo < 0:
+        raise argparse.ArgumentTypeError(f"orders are >= 0, got {text!r}")
     return range(lo, hi + 1)
 
 
@@ -50,7 +58,7 @@ def add_arx(subparsers: Any) -> argparse.ArgumentParser:
                    help="recording (.csv or .mat, formats.md section 3)")
     p.add_argument("--input", default="r", metavar="COL", help="input column (default r)")
     p.add_argument("--output", default="x", metavar="COL", help="output column (default x)")
-    p.add_argument("--orders", nargs=3, type=int, metavar=("NA", "NB", "NK"),
+    p.add_argument("--orders", nargs=3, type=nonnegative_int, metavar=("NA", "NB", "NK"),
                    help="orders na nb nk (required unless --select)")
     p.add_argument("--split", type=float, default=0.5, metavar="F",
                    help="fraction of the samples used for estimation, 0 < F < 1; the rest "
@@ -68,8 +76,9 @@ def add_arx(subparsers: Any) -> argparse.ArgumentParser:
                    help="nb grid for --select (default 1:3)")
     p.add_argument("--nk", type=_int_range, default=range(0, 5), metavar="LO:HI",
                    help="nk grid for --select (default 0:4)")
-    p.add_argument("--lags", type=int, default=25, metavar="M",
-                   help="correlation lags of the residual tests, samples (default 25)")
+    p.add_argument("--lags", type=positive_int, default=None, metavar="M",
+                   help="correlation lags of the residual tests, samples (default 25 or a "
+                        "quarter of the validation residuals if fewer; at most that quarter)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--out", metavar="DIR",
                    help="also write DIR/arx.json, DIR/residuals.png and DIR/validation.png")
@@ -78,11 +87,15 @@ def add_arx(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def _cmd_arx(args: argparse.Namespace) -> int:
+    from ...identify.arx import validate
+    from ...identify.arx.checks import finite_or_none
+    if args.out is not None:
+        prepare_output(args.out, ARX_FILES, [args.recording])
     rec, y, u, n_est = _arx_data(args)
     ye, ue, yv, uv = y[:n_est], u[:n_est], y[n_est:], u[n_est:]
     model, check, selection = _arx_fit(args, ye, ue, yv, uv, rec.sample_time, rec.source)
     result = _arx_result(args, model, check, rec, n_est,
-                         _num(validate(model, ye, ue, lags=args.lags).fit))
+                         finite_or_none(validate(model, ye, ue, lags=args.lags).fit))
     if selection is not None:
         result["selection"] = selection.to_dict()
     if args.out:
@@ -103,6 +116,7 @@ def _cmd_arx(args: argparse.Namespace) -> int:
 
 def _arx_data(args: argparse.Namespace):
     """The recording, output and input columns, and the number of estimation samples."""
+    import numpy as np
     from ...recording import load_recording
 
     rec = load_recording(args.recording)
@@ -126,6 +140,7 @@ def _arx_data(args: argparse.Namespace):
 
 def _arx_fit(args: argparse.Namespace, ye, ue, yv, uv, ts, src):
     """(model, validation on the held-out part, order selection or None)."""
+    from ...identify.arx import fit_arx, select_order, validate
     selection = None
     try:
         if args.select:
@@ -136,6 +151,7 @@ def _arx_fit(args: argparse.Namespace, ye, ue, yv, uv, ts, src):
         else:
             model = fit_arx(ye, ue, tuple(args.orders), sample_time=ts,
                             offset=args.offset)
+        args.lags = _check_lags(args.lags, len(yv) - model.max_lag)
         check = validate(model, yv, uv, lags=args.lags)
     except InputError as exc:
         if exc.source:
@@ -145,9 +161,24 @@ def _arx_fit(args: argparse.Namespace, ye, ue, yv, uv, ts, src):
     return model, check, selection
 
 
+def _check_lags(lags: int | None, residuals: int) -> int:
+    """--lags within what the residual tests can use: a quarter of the residuals (a
+    correlation at lag k averages N - k products; beyond N/4 it is noise, Box-Jenkins).
+    Not given: 25, or that quarter when it is smaller."""
+    limit = max(1, residuals // 4)
+    if lags is None:
+        return min(25, limit)
+    if lags > limit:
+        raise InputError(f"--lags {lags} is more than the residual tests can use: the "
+                         f"validation part has {residuals} residuals, so at most "
+                         f"{limit} lags (a quarter of them)", location="--lags")
+    return lags
+
+
 def _arx_result(args: argparse.Namespace, model: ArxModel, check: ArxValidation, rec,
                 n_est: int, fit_estimation: float | None) -> dict[str, Any]:
     """The JSON result of ``identify arx`` (keys as printed by ``--json``)."""
+    from ...identify.arx.checks import complex_pairs as _pairs, finite_or_none as _num
     return {
         "a": model.a.tolist(), "b": model.b.tolist(),
         "std_a": model.std_a.tolist(), "std_b": model.std_b.tolist(),
@@ -173,12 +204,17 @@ def _arx_result(args: argparse.Namespace, model: ArxModel, check: ArxValidation,
 
 def _arx_write(args: argparse.Namespace, model: ArxModel, check: ArxValidation,
                result: Mapping[str, Any], t0: float) -> None:
-    """DIR/arx.json, DIR/residuals.png and DIR/validation.png."""
-    from ...identify import plots
+    """DIR/arx.json, DIR/residuals.png and DIR/validation.png, all or none."""
+    from ...output import result_set, write_json
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "arx.json", json.dumps(result, indent=2) + "\n")
+    with result_set(args.out, inputs=[args.recording]) as out:
+        write_json(out / "arx.json", result)
+        _arx_figures(args, model, check, out, t0)
+
+
+def _arx_figures(args: argparse.Namespace, model: ArxModel, check: ArxValidation,
+                 out: Path, t0: float) -> None:
+    from ...identify import plots
     names = {"input_unit": _unit(args.input), "output_unit": _unit(args.output),
              "input_name": args.input, "output_name": args.output}
     label = (f"ARX [{model.na} {model.nb} {model.nk}] {args.input} -> {args.output}, "

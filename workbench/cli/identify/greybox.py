@@ -7,9 +7,12 @@ from pathlib import Path
 from typing import Sequence
 
 from ...errors import InputError
-from ...params import atomic_write_text
+from ..common import finite_float, positive_int, prepare_output
 
 __all__ = ["add_greybox"]
+
+#: Files ``--out`` receives.
+GREYBOX_FILES = ("estimates.json", "plant_estimated.toml", "fit.png")
 
 
 def add_greybox(subparsers) -> None:
@@ -39,17 +42,17 @@ def add_greybox(subparsers) -> None:
                    help="bounds in SI units (default: x0.1 .. x10 of the start value)")
     p.add_argument("--signals", nargs="+", default=["x", "p_a", "p_b"], metavar="SIG",
                    help="signals to compare when recorded (default: x p_a p_b)")
-    p.add_argument("--shooting-interval", type=float, default=0.05, metavar="S",
+    p.add_argument("--shooting-interval", type=finite_float, default=0.05, metavar="S",
                    help="shooting interval, s (default 0.05)")
     p.add_argument("--x0", choices=("estimate", "from_recording"), default="estimate",
                    help="initial state: estimated (default) or measured values fixed")
     p.add_argument("--replay", choices=("auto", "open", "closed"), default="auto",
                    help="before/after check: closed loop on r when the recording has r and "
                         "the plant a [controller] (auto), or always open loop on u")
-    p.add_argument("--substeps", type=int, default=None, metavar="N",
+    p.add_argument("--substeps", type=positive_int, default=None, metavar="N",
                    help="integration steps per sample (default: steps <= 1 ms, 0.125 ms "
                         "with dry friction)")
-    p.add_argument("--max-iter", type=int, default=50, metavar="N",
+    p.add_argument("--max-iter", type=positive_int, default=50, metavar="N",
                    help="IPOPT iterations (default 50)")
     p.add_argument("--out", metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -74,32 +77,47 @@ def _parse_bounds(items: Sequence[str]) -> dict[str, tuple[float, float]]:
 
 
 def _cmd_greybox(args) -> int:
+    out_dir = (prepare_output(args.out, GREYBOX_FILES, [args.plant, *args.recordings])
+               if args.out is not None else None)
+    if not args.shooting_interval > 0:
+        raise InputError(f"--shooting-interval must be > 0 s, got {args.shooting_interval:g}",
+                         location="--shooting-interval")
+    bounds = _parse_bounds(args.bounds)
     from ...identify.grey_box import estimate
+    from ...output import strict_json
     from ...plant import Plant
     from ...recording import load_recording
     plant = Plant.from_toml(args.plant)
     recs = [load_recording(p) for p in args.recordings]
-    res = estimate(plant, recs, args.params, bounds=_parse_bounds(args.bounds),
+    if not (args.quiet or args.json):   # a line even where no progress bar is drawn (no tty)
+        import sys
+        print(f"greybox: estimating {', '.join(args.params)} from {len(recs)} recording(s) "
+              f"({sum(len(r) for r in recs)} samples) ...", file=sys.stderr, flush=True)
+    res = estimate(plant, recs, args.params, bounds=bounds,
                    signals=tuple(args.signals), shooting_interval=args.shooting_interval,
                    x0=args.x0, replay=args.replay, substeps=args.substeps,
                    max_iter=args.max_iter,
                    verbose=args.verbose, progress=False if args.quiet or args.json else None)
     out = res.to_dict()
     out["plant"] = str(args.plant)
-    if args.out:
-        d = Path(args.out)
-        d.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(d / "estimates.json", json.dumps(out, indent=2) + "\n")
-        res.plant_.params.to_toml(d / "plant_estimated.toml")
-        from ...identify.plots import greybox_figure
-        greybox_figure(recs, res, d / "fit.png",
-                       title=f"grey-box fit: {plant.name}, {', '.join(res.names)}")
-        out["files"] = [str(d / "estimates.json"), str(d / "plant_estimated.toml"),
-                        str(d / "fit.png")]
+    if out_dir is not None:
+        _write(args, out_dir, out, res, recs, plant.name)
+        out["files"] = [str(out_dir / f) for f in GREYBOX_FILES]
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(strict_json(out), indent=2))
     else:
         print(res.table())
         if args.out:
             print(f"wrote {args.out}/estimates.json, plant_estimated.toml, fit.png")
     return 0
+
+
+def _write(args, out_dir: Path, out: dict, res, recs, plant_name: str) -> None:
+    """estimates.json, plant_estimated.toml and fit.png, all or none."""
+    from ...identify.plots import greybox_figure
+    from ...output import result_set, write_json
+    with result_set(out_dir, inputs=[args.plant, *args.recordings]) as stage:
+        write_json(stage / "estimates.json", out)
+        res.plant_.params.to_toml(stage / "plant_estimated.toml")
+        greybox_figure(recs, res, stage / "fit.png",
+                       title=f"grey-box fit: {plant_name}, {', '.join(res.names)}")

@@ -12,10 +12,25 @@ from typing import Any
 import numpy as np
 
 from ...errors import InputError
-from ...identify.valve import (ValveFitReport, analyse, centre_dense_commands,
-                               compare_pressure_gain, generate_valve_table, load_valve_table,
-                               valve_flow_law, write_figures)
+from ...output import check_not_input
 from ...params import PlantParams, atomic_write_text
+from ..common import positive_int
+
+
+def _lazy(name: str):
+    """``workbench.identify.valve.<name>``, imported on first call (h15io: the parser is
+    built at every start, and identify.valve loads SciPy and CasADi; ``--help`` < 1 s)."""
+    def call(*args, **kwargs):
+        from ...identify import valve
+        return getattr(valve, name)(*args, **kwargs)
+    call.__name__ = name
+    return call
+
+
+(ValveFitReport, analyse, centre_dense_commands, compare_pressure_gain, generate_valve_table,
+ load_valve_table, valve_flow_law, write_figures) = map(_lazy, (
+    "ValveFitReport", "analyse", "centre_dense_commands", "compare_pressure_gain",
+    "generate_valve_table", "load_valve_table", "valve_flow_law", "write_figures"))
 
 __all__ = ["add_valve"]
 
@@ -83,8 +98,8 @@ def add_valve(subparsers) -> None:
     g.add_argument("--p", metavar="LIST",
                    help="pressures, Pa abs: a,b,c or START:STOP:NUM (default: 15 from "
                         "atmosphere to supply)")
-    g.add_argument("--n-u", type=int, default=21, help="number of default commands")
-    g.add_argument("--n-p", type=int, default=15, help="number of default pressures")
+    g.add_argument("--n-u", type=positive_int, default=21, help="number of default commands")
+    g.add_argument("--n-p", type=positive_int, default=15, help="number of default pressures")
     g.set_defaults(func=_cmd_valve_table)
 
 
@@ -207,6 +222,7 @@ def _float_list(text: str, option: str) -> np.ndarray:
 
 
 def _cmd_valve_table(args: argparse.Namespace) -> int:
+    check_not_input([args.out], [args.plant])       # h15io: never overwrite the input
     prm = PlantParams.from_toml(args.plant)
     cmd = ["workbench", "identify", "valve-table", str(args.plant), "--out", str(args.out),
            "--leakage", repr(args.leakage), "--noise", repr(args.noise), "--seed", str(args.seed)]
