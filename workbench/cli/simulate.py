@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from .common import EPILOG
+from .recording_args import add_recording_options
 
 __all__ = ["register"]
 
@@ -30,6 +31,7 @@ def register(subparsers) -> None:
                    help="force closed-loop or open-loop replay (default: auto)")
     s.add_argument("--no-plot", action="store_true", help="do not write simulation.png")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_recording_options(s)
     s.set_defaults(func=_simulate)
 
 
@@ -39,7 +41,8 @@ def _simulate(args: argparse.Namespace) -> int:
     from ..recording import Recording, fit_signals
     from ..replay import replay
     plant = Plant.from_toml(args.plant)
-    rec = Recording.load(args.recording)
+    from .recording_args import load_from_args
+    rec = load_from_args(args, args.recording, plant=plant)
     out_dir = Path(args.out)
     result = replay(plant, rec, mode=args.mode, progress=None if not args.quiet else False)
     sim_rec = result.recording
@@ -54,6 +57,6 @@ def _simulate(args: argparse.Namespace) -> int:
                       title=f"{plant.name}: {mode} replay of {Path(args.recording).name}")
     print(f"{mode} replay of {args.recording} ({len(rec)} samples, {rec.duration:.3g} s)")
     for k, v in fits.items():
-        print(f"  fit {k:<4} {v:7.2f} %")
+        print(f"  fit {k:<4} " + ("undefined (constant signal)" if v is None else f"{v:7.2f} %"))
     print(f"wrote {out_dir / 'simulation.csv'} and {out_dir / 'fit.json'}")
     return 0

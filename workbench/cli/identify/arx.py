@@ -68,11 +68,14 @@ def add_arx(subparsers: Any) -> argparse.ArgumentParser:
                    help="nb grid for --select (default 1:3)")
     p.add_argument("--nk", type=_int_range, default=range(0, 5), metavar="LO:HI",
                    help="nk grid for --select (default 0:4)")
-    p.add_argument("--lags", type=int, default=25, metavar="M",
-                   help="correlation lags of the residual tests, samples (default 25)")
+    p.add_argument("--lags", type=int, default=None, metavar="M",
+                   help="correlation lags of the residual tests, samples (default 25, "
+                        "fewer on short data; at most a quarter of the residuals)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--out", metavar="DIR",
                    help="also write DIR/arx.json, DIR/residuals.png and DIR/validation.png")
+    from ..recording_args import add_recording_options
+    add_recording_options(p)
     p.set_defaults(func=_cmd_arx)
     return p
 
@@ -103,9 +106,9 @@ def _cmd_arx(args: argparse.Namespace) -> int:
 
 def _arx_data(args: argparse.Namespace):
     """The recording, output and input columns, and the number of estimation samples."""
-    from ...recording import load_recording
+    from ..recording_args import load_from_args
 
-    rec = load_recording(args.recording)
+    rec = load_from_args(args, args.recording, required=(args.input, args.output))
     for role, col in (("input", args.input), ("output", args.output)):
         if not rec.has(col):
             raise InputError(f"no column '{col}' for the {role}; the recording has: "

@@ -55,6 +55,8 @@ def add_greybox(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--verbose", action="store_true", help="print IPOPT's iteration log")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from ..recording_args import add_recording_options
+    add_recording_options(p)
     p.set_defaults(func=_cmd_greybox)
 
 
@@ -76,9 +78,9 @@ def _parse_bounds(items: Sequence[str]) -> dict[str, tuple[float, float]]:
 def _cmd_greybox(args) -> int:
     from ...identify.grey_box import estimate
     from ...plant import Plant
-    from ...recording import load_recording
+    from ..recording_args import load_from_args
     plant = Plant.from_toml(args.plant)
-    recs = [load_recording(p) for p in args.recordings]
+    recs = [load_from_args(args, p, plant=plant) for p in args.recordings]
     res = estimate(plant, recs, args.params, bounds=_parse_bounds(args.bounds),
                    signals=tuple(args.signals), shooting_interval=args.shooting_interval,
                    x0=args.x0, replay=args.replay, substeps=args.substeps,
