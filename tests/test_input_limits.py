@@ -97,7 +97,7 @@ def test_cli_without_the_mapping_names_the_columns_and_the_option(rig_file, caps
                  "--orders", "1", "1", "1"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "missing required columns 't', 'x'" in err and "--columns" in err
+    assert "missing required column 't'" in err and "--columns t=COLUMN" in err
 
 
 def test_cli_window_option(rig_file, capsys):
@@ -110,3 +110,48 @@ def test_cli_window_option(rig_file, capsys):
     assert result["n_estimation"] + result["n_validation"] == 301   # t = 1.00 .. 4.00 s
     with pytest.raises(SystemExit):
         main(["identify", "arx", str(rig_file), "--window", "4:1"])
+
+
+# ---- workbench check: physical plausibility --------------------------------------------
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+
+
+def _edited(tmp_path, source, old, new, name="p.toml"):
+    text = (ROOT / source).read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / name
+    path.write_text(text.replace(old, new), encoding="utf-8")
+    return path
+
+
+def test_check_refuses_a_valve_law_beyond_the_iso6358_limit(tmp_path, capsys):
+    # The case: a fitted approximation II that gives tens of kg/s. Scale the
+    # reference fit's inlet polynomial by 1e3: its full-opening flow becomes ~45 kg/s
+    # against an ISO 6358 choked flow of C p_s rho_ANR = 6.25e-8 * 6e5 * 1.185 = 44 g/s.
+    src = "tests/data/plants/input_affine.toml"
+    path = _edited(tmp_path, src, "affine_psi_in = [0.08057502639506502",
+                   "affine_psi_in = [80.57502639506502")
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "ISO 6358 choked flow 0.04444 kg/s" in err and "[valve] affine_psi_in" in err
+    # the reference fit itself passes (largest flow 45.4 g/s within 1.5 x 44.4 g/s)
+    assert main(["check", str(ROOT / src)]) == 0
+
+
+def test_check_refuses_a_controller_period_far_below_the_fastest_pole(tmp_path, capsys):
+    # situm rig: fastest pole ~58 rad/s (time constant 17 ms); 1 us is 5.8e-5 of it
+    path = _edited(tmp_path, "designs/plants/situm_rodless.toml",
+                   "sample_time = 0.01 ", "sample_time = 1e-6 ")
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "[controller] sample_time" in err and "fastest time constant" in err
+    assert "1e+07 steps" in err                                  # 10 s / 1e-6 s
+
+
+def test_check_json_reports_the_plausibility_numbers(capsys):
+    assert main(["check", str(ROOT / "designs/plants/situm_rodless.toml"), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)["plausibility"]
+    # choked flow C p_s rho_ANR sqrt(T_ref / T) with T = T_ref: computed here independently
+    assert got["choked_flow_kg_s"] == pytest.approx(6.23e-9 * 5.0e5 * 1.185, rel=1e-12)
+    # 10 s at 10 ms = 1000 samples x 8 bytes x (time + command + states + outputs)
+    assert got["run_bytes_10s"] == pytest.approx(1000 * 8 * 13, rel=0.5)

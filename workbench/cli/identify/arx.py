@@ -108,7 +108,7 @@ def _arx_data(args: argparse.Namespace):
     """The recording, output and input columns, and the number of estimation samples."""
     from ..recording_args import load_from_args
 
-    rec = load_from_args(args, args.recording, required=(args.input, args.output))
+    rec = load_from_args(args, args.recording, required=("t",))  # input, output: checked below
     for role, col in (("input", args.input), ("output", args.output)):
         if not rec.has(col):
             raise InputError(f"no column '{col}' for the {role}; the recording has: "

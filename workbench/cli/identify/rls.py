@@ -74,7 +74,7 @@ def _parse_forgetting(text: str) -> float | None:
 def _cmd_rls(args: argparse.Namespace) -> int:
     from ...recording import UNITS
     from ..recording_args import load_from_args
-    rec = load_from_args(args, args.recording, required=(args.input, args.output))
+    rec = load_from_args(args, args.recording, required=("t",))  # input, output: checked below
     for opt, col in (("--input", args.input), ("--output", args.output)):
         if col not in rec.columns:
             raise InputError(f"{opt} {col}: the recording has no column '{col}'; its columns "
