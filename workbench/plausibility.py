@@ -32,7 +32,7 @@ from .errors import InputError, WorkbenchError
 from .physics import gas, valve
 
 __all__ = ["FLOW_MARGIN", "MIN_PERIOD_RATIO", "RUN_SECONDS", "MAX_RUN_BYTES",
-           "Plausibility", "check_plant"]
+           "CENTER_TOLERANCE", "Plausibility", "check_plant", "check_controller"]
 
 #: A flow law may exceed the ISO 6358 choked flow of the stated conductance by this
 #: factor (a fitted polynomial overshoots a little between its data points).
@@ -43,6 +43,10 @@ MIN_PERIOD_RATIO = 1e-4
 RUN_SECONDS = 10.0
 #: Largest memory a run of :data:`RUN_SECONDS` may need, bytes.
 MAX_RUN_BYTES = 1e9
+#: Largest distance of a controller's centre command from the valve's centre, as a
+#: fraction of the command span: beyond it the valve is more than half open at zero
+#: error, and the loop drives the piston into an end stop instead of regulating.
+CENTER_TOLERANCE = 0.5
 
 
 @dataclass(frozen=True)
@@ -170,3 +174,43 @@ def check_plant(plant: Any) -> Plausibility:
                 f"samples, {run_bytes / 1e9:.3g} GB (limit {MAX_RUN_BYTES / 1e9:g} GB)",
                 source=src, location="[controller] sample_time")
     return Plausibility(choked, q_max, pole, run_bytes, tuple(notes))
+
+
+def check_controller(plant: Any, controller: Any) -> None:
+    """Refuse a controller whose command at zero error does not centre the plant's valve.
+
+    A position loop rests where its command at zero error, ``u_center``, holds the
+    spool centred (``command_center + null_offset``). A controller built with another
+    centre (e.g. the default ``u_center = 0 V`` for a 0..10 V valve centred at 5 V)
+    opens the valve fully at zero error: the piston runs into an end stop, and a
+    validation reports absurd overshoot instead of an error.
+
+    Parameters
+    ----------
+    plant : Plant
+    controller : object
+        Checked when it has a ``u_center`` (V); others pass.
+
+    Raises
+    ------
+    InputError
+        When ``u_center`` lies outside the valve's command range or more than
+        :data:`CENTER_TOLERANCE` of the span from the valve's centre.
+    """
+    u_center = getattr(controller, "u_center", None)
+    if not isinstance(u_center, (int, float)):
+        return
+    prm = plant.params
+    centre = float(prm["valve.command_center"]) + float(prm.get("valve.null_offset", 0.0))
+    span = float(prm["valve.command_span"])
+    lo, hi = float(prm["valve.command_min"]), float(prm["valve.command_max"])
+    opening = abs(float(u_center) - centre) / span
+    if math.isfinite(u_center) and lo <= u_center <= hi and opening <= CENTER_TOLERANCE:
+        return
+    raise InputError(
+        f"the controller's centre command u_center = {u_center:g} V opens the valve by "
+        f"{100 * opening:.0f} % of its span at zero error (the valve is centred at "
+        f"{centre:g} V, span {span:g} V, range [{lo:g}, {hi:g}] V): the loop would drive "
+        "the piston into an end stop. Build the controller with u_center = "
+        f"{centre:g} (plant.params['valve.command_center']), u_min = {lo:g}, u_max = {hi:g}",
+        source=prm.source, location="[valve] command_center")
