@@ -7,6 +7,7 @@ key and what was expected.
 
 from __future__ import annotations
 
+import os
 import re
 import tomllib
 from pathlib import Path
@@ -383,3 +384,97 @@ def test_gamma_identically_zero_is_an_error(tmp_path):
     with pytest.raises(InputError, match=_prefix(path, "[valve] affine_gamma")) as exc:
         PlantParams.from_toml(path)
     assert "at least one nonzero coefficient" in str(exc.value)
+
+
+# ---------------------------------------------------------------------- issue 15: abuse
+def test_non_utf8_plant_file_is_an_input_error_with_the_line(tmp_path):
+    path = write_plant(tmp_path / "p.toml")
+    text = path.read_bytes().replace(b'name = "', b'name = "caf\xe9 ')  # Latin-1 e-acute
+    path.write_bytes(text)
+    with pytest.raises(InputError, match=_prefix(path, "line 1")) as exc:
+        PlantParams.from_toml(path)
+    assert "not UTF-8" in str(exc.value) and "0xe9" in str(exc.value)
+
+
+def test_deeply_nested_toml_is_an_input_error_not_a_recursion_error(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text("x = " + "[" * 100_000 + "]" * 100_000 + "\n", encoding="utf-8")
+    with pytest.raises(InputError, match="^" + re.escape(f"{path}: ")) as exc:
+        PlantParams.from_toml(path)
+    assert "nested too deeply" in str(exc.value)
+
+
+def test_byte_order_mark_is_accepted_as_for_recordings(tmp_path):
+    plain = write_plant(tmp_path / "p.toml")
+    bom = tmp_path / "bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    assert dict(PlantParams.from_toml(bom).values) == dict(PlantParams.from_toml(plain).values)
+
+
+def test_top_level_key_is_not_called_a_section(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text('title = "rig"\n' + tomli_w.dumps(plant_dict()), encoding="utf-8")
+    with pytest.raises(InputError, match=_prefix(path, "key 'title'")) as exc:
+        PlantParams.from_toml(path)
+    msg = str(exc.value)
+    assert "unknown top-level key 'title'" in msg and "section" not in msg.split(";")[0]
+    assert "'name'" in msg
+
+
+def test_top_level_key_of_a_section_says_where_it_belongs(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text("mass = 1.2\n" + tomli_w.dumps(plant_dict()), encoding="utf-8")
+    with pytest.raises(InputError, match="a key of \\[load\\]"):
+        PlantParams.from_toml(path)
+
+
+@pytest.mark.parametrize("celsius", [20, 20.0, -10.0, 0.0])
+def test_temperature_in_celsius_is_refused_with_the_kelvin_value(tmp_path, celsius):
+    path = write_plant(tmp_path / "p.toml", overrides={"gas.temperature": celsius})
+    with pytest.raises(InputError, match=_prefix(path, "[gas] temperature")) as exc:
+        PlantParams.from_toml(path)
+    msg = str(exc.value)
+    assert "Celsius" in msg and f"{celsius + 273.15:.2f} K" in msg
+
+
+@pytest.mark.parametrize("key, value, hint", [
+    ("cylinder.bore", 25.0, "mm?"),
+    ("cylinder.stroke", 500.0, "mm?"),
+    ("valve.sonic_conductance", 0.7, "l/(s bar)?"),
+    ("cylinder.dead_volume_a", 3.0, "cm^3?"),
+    ("gas.atmospheric_pressure", 1.01325, "bar?"),
+])
+def test_unit_slips_in_sizes_are_refused_with_the_conversion(tmp_path, key, value, hint):
+    # Each value is 1000x (or 1e5x) away from any real servodrive, the bounds a
+    # factor >= 10 away from the largest real one (see params_units.PLAUSIBLE).
+    path = write_plant(tmp_path / "p.toml", overrides={key: value})
+    section, name = key.split(".")
+    with pytest.raises(InputError, match=_prefix(path, f"[{section}] {name}")) as exc:
+        PlantParams.from_toml(path)
+    assert hint in str(exc.value)
+
+
+def test_lines_segments_alone_names_the_missing_keys(tmp_path):
+    path = write_plant(tmp_path / "p.toml", overrides={"lines.segments": 4})
+    with pytest.raises(InputError, match=_prefix(path, "[lines] length, diameter")) as exc:
+        PlantParams.from_toml(path)
+    assert "needs length and diameter" in str(exc.value)
+
+
+def test_controller_sample_time_of_a_nanosecond_is_refused(tmp_path):
+    path = write_plant(tmp_path / "p.toml", controller=True,
+                       overrides={"controller.sample_time": 1e-9})
+    with pytest.raises(InputError, match=_prefix(path, "[controller] sample_time")) as exc:
+        PlantParams.from_toml(path)
+    assert "2.4e+10 steps" in str(exc.value)   # 24 s / 1e-9 s
+
+
+@pytest.mark.parametrize("make", ["dir", "fifo"])
+def test_plant_path_that_is_not_a_regular_file(tmp_path, make):
+    path = tmp_path / "p.toml"
+    if make == "dir":
+        path.mkdir()
+    else:
+        os.mkfifo(path)   # reading it would block forever
+    with pytest.raises(InputError, match="^" + re.escape(f"{path}: ")):
+        PlantParams.from_toml(path)

@@ -528,3 +528,174 @@ def test_fit_signals_errors():
     with pytest.raises(InputError, match=r"signal 'x': measured and model have "
                                          r"different shapes"):
         fit_signals(measured, {"x": measured["x"][:-1]})
+
+
+# ---- issue 15: units, plausibility, files as rigs write them ---------------------------
+def rig_csv(tmp_path: Path, t, x, u=None, meta: str = "", header: str = "t,u,x",
+            name: str = "rig.csv", trailing: str = "") -> Path:
+    """A recording of a slow move (u = 5 V unless given), one row per sample."""
+    u = np.full(len(t), 5.0) if u is None else u
+    rows = "".join(f"{float(a)!r},{float(b)!r},{float(c)!r}{trailing}\n"
+                   for a, b, c in zip(t, u, x))
+    return write(tmp_path, meta + header + trailing + "\n" + rows, name)
+
+
+@pytest.fixture(scope="module")
+def situm_params():
+    from workbench.params import PlantParams
+    return PlantParams.from_toml(Path(__file__).parents[1] / "designs/plants/situm_rodless.toml")
+
+
+T_1K = np.arange(2001) * 1e-3                  # 2 s at 1 kHz
+X_M = 0.2 + 0.1 * T_1K / 2.0                   # 0.2 .. 0.3 m on a 0.5 m stroke
+
+
+def test_position_in_mm_is_refused_against_the_stroke(tmp_path, situm_params):
+    path = rig_csv(tmp_path, T_1K, X_M * 1e3)                  # x = 200 .. 300 "m"
+    with raises(path, r", line 2, column 'x': 200 m is implausible .*mm\?"):
+        load_recording(path)                                   # plant-free: |x| > 20 m
+    small = rig_csv(tmp_path, T_1K, X_M * 1e3 / 100, name="cm.csv")   # 2 .. 3 "m"
+    load_recording(small)                                      # plausible without a plant
+    with raises(small, r", line 2, column 'x': 2 m is outside the stroke \[0, 0.5\] m"):
+        load_recording(small, plant=situm_params)
+
+
+def test_position_in_mm_with_the_plant_suggests_mm(tmp_path, situm_params):
+    # 15 mm written as 15 "m": below the plant-free bound, refused by the 0.5 m stroke
+    mm = rig_csv(tmp_path, T_1K, np.full(T_1K.size, 15.0), name="mm.csv")
+    with raises(mm, r".*outside the stroke.*in mm\? declare 'x=mm'"):
+        load_recording(mm, plant=situm_params)
+    assert len(load_recording(mm, columns="x=x:mm", plant=situm_params)) == T_1K.size
+
+
+def test_time_in_ms_is_refused_with_the_hint(tmp_path):
+    t_ms = np.arange(0.0, 24001.0, 10.0)                        # a 24 s test at 100 Hz in ms
+    path = rig_csv(tmp_path, t_ms, np.full(t_ms.size, 0.25))
+    with raises(path, r", column 't': the median sample step is 10 s .*time in ms\?"):
+        load_recording(path)
+    ok = rig_csv(tmp_path, t_ms, np.full(t_ms.size, 0.25), meta="# units: t=ms\n",
+                 name="declared.csv")
+    rec = load_recording(ok)
+    assert rec.duration == pytest.approx(24.0, rel=1e-12)      # converted: s
+    assert rec.metadata["converted_to_si"] == "t from ms"
+
+
+@pytest.mark.parametrize("scale, hint", [(1e3, "mV"), (2e5, "mV")])   # mV, and 1e6 V
+def test_command_in_mv_or_absurd_volts_is_refused(tmp_path, scale, hint):
+    path = rig_csv(tmp_path, T_1K, X_M, u=np.full(T_1K.size, 5.0) * scale)
+    with raises(path, rf", line 2, column 'u': .* is implausible .*{hint}\?"):
+        load_recording(path)
+
+
+def test_command_outside_the_valve_range(tmp_path, situm_params):
+    path = rig_csv(tmp_path, T_1K, X_M, u=np.full(T_1K.size, 12.0))   # valve: 0..10 V
+    load_recording(path)
+    with raises(path, r", line 2, column 'u': 12 V is outside the valve's command range"):
+        load_recording(path, plant=situm_params)
+
+
+def test_sample_time_header_over_a_1ms_time_column_is_refused(tmp_path):
+    path = rig_csv(tmp_path, T_1K, X_M, meta="# sample_time: 0.01\n")
+    with raises(path, r", line 1, metadata 'sample_time': sample_time 0.01 s contradicts "
+                      r"the time column, whose median step is 0.001 s"):
+        load_recording(path)
+
+
+def test_huge_gap_in_time_is_refused_before_anything_allocates(tmp_path):
+    t = T_1K.copy()
+    t[1000:] += 1e6                                             # a 10^6 s gap
+    path = rig_csv(tmp_path, t, X_M)
+    with raises(path, r", line 1002, column 't': a gap of 1e\+06 s"):
+        load_recording(path)
+    # a window on one side of the gap is one continuous run
+    assert len(load_recording(path, window=(None, 0.9995))) == 1000
+
+
+def test_jitter_within_the_stated_tolerance_is_accepted(tmp_path):
+    rng = np.random.default_rng(3)
+    # +-2 % jitter on each step; a dropped sample (2 steps) too: both inside the tolerances
+    steps = 1e-3 * (1.0 + 0.02 * rng.uniform(-1.0, 1.0, T_1K.size - 1))
+    steps[500] = 2e-3
+    t = np.concatenate([[0.0], np.cumsum(steps)])
+    rec = load_recording(rig_csv(tmp_path, t, X_M, meta="# sample_time: 0.001\n"))
+    assert rec.sample_time == 0.001
+    # 6 % off the median step is beyond JITTER_TOLERANCE = 5 %: the header is refused
+    bad = rig_csv(tmp_path, t, X_M, meta="# sample_time: 0.00106\n", name="bad.csv")
+    with pytest.raises(InputError, match="contradicts the time column"):
+        load_recording(bad)
+
+
+def test_trailing_delimiters_are_not_a_column(tmp_path):
+    plain = load_recording(rig_csv(tmp_path, T_1K[:50], X_M[:50]))
+    trailing = load_recording(rig_csv(tmp_path, T_1K[:50], X_M[:50], trailing=",",
+                                      name="trailing.csv"))
+    assert trailing == plain and trailing.columns == ("t", "u", "x")
+    # the slow parser (used once a row is bad) agrees
+    path = write(tmp_path, "t,u,x,\n0,5,0.2,\n0.001,5,0.2,\n0.002,5,oops,\n", "bad.csv")
+    with raises(path, r", line 4, column 'x': 'oops' is not a number"):
+        load_recording(path)
+
+
+def test_fifo_is_not_called_empty(tmp_path):
+    path = tmp_path / "stream.csv"
+    os.mkfifo(path)
+    with raises(path, ": is not a regular file"):
+        load_recording(path)
+
+
+def test_time_window_keeps_line_numbers_of_the_file(tmp_path):
+    x = X_M.copy()
+    path = rig_csv(tmp_path, T_1K, x)
+    rec = load_recording(path, window=(0.5, 1.0))
+    assert rec.t[0] == 0.5 and rec.t[-1] == 1.0 and len(rec) == 501
+    with raises(path, r", column 't': time window \[2, 3\] s holds 1 sample\(s\)"):
+        load_recording(path, window=(2.0, 3.0))                 # only t = 2.0
+    with raises(path, r": time window \[1, 0.5\] s is empty"):
+        load_recording(path, window=(1.0, 0.5))
+
+
+def test_column_mapping_renames_and_converts(tmp_path):
+    path = rig_csv(tmp_path, T_1K * 1e3, X_M * 1e3, header="time_ms,cmd,pos_mm")
+    rec = load_recording(path, columns="t=time_ms:ms,u=cmd,x=pos_mm:mm")
+    assert rec.columns == ("t", "u", "x")
+    np.testing.assert_allclose(rec["x"], X_M, rtol=1e-15)     # one multiplication
+    np.testing.assert_allclose(rec.t, T_1K, rtol=1e-15, atol=1e-18)
+    # the converted recording writes SI and reads back exactly (no second conversion)
+    back = load_recording(rec.to_csv(tmp_path / "si.csv"))
+    assert back == rec
+    with raises(path, r", line 1 \(header\): missing required columns 't', 'u', 'x'.*"
+                      r"--columns t=COLUMN"):
+        load_recording(path)
+    with pytest.raises(InputError, match="does not have; its columns are: time_ms"):
+        load_recording(path, columns="x=position:mm")
+    with pytest.raises(InputError, match="unknown length unit 'ms'"):
+        load_recording(path, columns="x=pos_mm:ms")
+
+
+@pytest.mark.parametrize("header, meta", [("t,u,x [mm],p_a (bar)", ""),
+                                          ("t,u,x,p_a", "# units: x=mm, p_a=bar\n")])
+def test_units_in_the_header_or_metadata(tmp_path, header, meta):
+    rows = "".join(f"{float(a)!r},5.0,{float(b)!r},3.5\n"
+                   for a, b in zip(T_1K[:20], X_M[:20] * 1e3))
+    rec = load_recording(write(tmp_path, meta + header + "\n" + rows))
+    assert rec.columns == ("t", "u", "x", "p_a")
+    np.testing.assert_allclose(rec["x"], X_M[:20], rtol=1e-15)
+    assert np.all(rec["p_a"] == 3.5e5)
+
+
+def test_arx_input_without_a_u_column(tmp_path):
+    rows = "".join(f"{float(a)!r},{float(b)!r},3.5e5\n" for a, b in zip(T_1K[:20], X_M[:20]))
+    path = write(tmp_path, "t,x,p_a\n" + rows)
+    with raises(path, r", line 1 \(header\): missing required column 'u'"):
+        load_recording(path)
+    rec = load_recording(path, required=("p_a", "x"))
+    assert rec.columns == ("t", "x", "p_a") and rec.required == ("t", "p_a", "x")
+    assert rec.with_columns(v=np.zeros(20)).required == rec.required
+
+
+def test_fit_of_a_constant_signal_is_null_in_json():
+    import json
+    measured = sample_recording(n=50).with_columns(p_b=np.full(50, 3e5))
+    fits = fit_signals(measured, measured.with_columns(p_b=np.full(50, 3.1e5)))
+    assert fits["p_b"] is None and fits["x"] == 100.0
+    assert json.loads(json.dumps(fits, allow_nan=False))["p_b"] is None

@@ -38,7 +38,6 @@ import difflib
 import math
 import os
 import tempfile
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -46,6 +45,7 @@ from typing import Any, Mapping
 import tomli_w
 
 from .errors import InputError
+from .params_units import check_units, read_toml, slip_hint
 
 __all__ = [
     "Key",
@@ -318,6 +318,9 @@ class PlantParams:
                 name = content
                 continue
             if top not in REQUIRED_SECTIONS + OPTIONAL_SECTIONS:
+                if not isinstance(content, Mapping):
+                    raise InputError(_top_level_key_message(top, content), source=source,
+                                     location=f"key '{top}'")
                 hint = difflib.get_close_matches(top, REQUIRED_SECTIONS + OPTIONAL_SECTIONS, 1)
                 known = ", ".join(f"[{s}]" for s in REQUIRED_SECTIONS + OPTIONAL_SECTIONS)
                 raise InputError(
@@ -350,24 +353,22 @@ class PlantParams:
                                  source=source, location=_fmt_path(key.path))
         _check_effects(values, source)
         _check_consistency(values, source)
+        check_units(values, source)
         return cls(values=dict(values), name=name, source=source)
 
     @classmethod
     def from_toml(cls, path: str | os.PathLike) -> "PlantParams":
-        """Read and validate a plant file."""
+        """Read and validate a plant file (UTF-8, with or without a byte-order mark).
+
+        Raises
+        ------
+        InputError
+            Naming the file (and key) for a missing, unreadable, non-UTF-8 or invalid
+            TOML file and for everything :meth:`from_dict` rejects.
+        """
         path = Path(path)
         src = str(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise InputError("file not found", source=src) from None
-        except OSError as exc:
-            raise InputError(f"cannot read the file: {exc.strerror}", source=src) from None
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"not valid TOML: {exc}", source=src) from None
-        return cls.from_dict(data, source=src)
+        return cls.from_dict(read_toml(path), source=src)
 
     # ---------------------------------------------------------------- access
     def __getitem__(self, path: str) -> Any:
@@ -470,6 +471,15 @@ def _nest(values: Mapping[str, Any], name: str) -> dict[str, Any]:
     return out
 
 
+def _top_level_key_message(top: str, content: Any) -> str:
+    """Explain a key outside every section (``title = ...``): not a section."""
+    owners = [k.section for k in SCHEMA if k.name == top]
+    where = (f"; '{top}' is a key of [{owners[0]}]: move it under that section"
+             if owners else "")
+    return (f"unknown top-level key '{top}' (= {content!r}); outside the sections a plant "
+            f"file may only have 'name' (a string){where}")
+
+
 def _check_value(key: Key, raw: Any, source: str) -> Any:
     loc = _fmt_path(key.path)
     if key.kind == "floats":
@@ -495,7 +505,8 @@ def _check_value(key: Key, raw: Any, source: str) -> Any:
     if key.high is not None and (val > key.high or (key.high_open and val == key.high)):
         bad = True
     if bad:
-        raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
+        raise InputError(f"expected {key.expected()}, got {raw!r}"
+                         + slip_hint(key.path, val), source=source, location=loc)
     return val
 
 
@@ -521,6 +532,11 @@ def _check_array(key: Key, raw: Any, source: str, loc: str) -> tuple[float, ...]
 
 
 def _check_effects(values: Mapping[str, Any], source: str) -> None:
+    if "lines.segments" in values and not any(k.path in values
+                                              for k in EFFECTS["line_dynamics"]):
+        raise InputError("segments alone describes no lines: [lines] needs length and "
+                         "diameter (m) for the line_dynamics effect; give both, or remove "
+                         "[lines]", source=source, location="[lines] length, diameter")
     for effect, keys in EFFECTS.items():
         given = [k for k in keys if k.path in values]
         if not given or effect in _ANY_KEY_EFFECTS:

@@ -75,7 +75,7 @@ def replay_figure(rec, sim, fits: Mapping[str, float], path: str | os.PathLike,
         if n == "x" and "r" in rec:
             ax.plot(rec.t, rec["r"] * k, "k--", lw=0.8, label="reference r")
         ax.set_ylabel(lab)
-        if n in fits:
+        if fits.get(n) is not None:
             ax.set_title(f"fit {fits[n]:.1f} %", fontsize=9, loc="right")
         ax.legend(loc="best", fontsize=8)
     save_figure(fig, path)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Mapping
@@ -35,6 +35,8 @@ import numpy as np
 
 from .errors import InputError
 from .recording_io import KNOWN_COLUMNS, REQUIRED_COLUMNS, Where, read_csv, read_mat, write_atomic
+from .recording_units import (apply_units, check_against_plant, check_plausible,
+                              parse_column_map)
 from .signals import FIT_SIGNALS, fit, fit_signals
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -92,6 +94,9 @@ class Recording:
         must be a positive number.
     source : str
         Where the recording came from (a file path), used in error messages.
+    required : tuple of str
+        Columns that must be present: ``("t", "u", "x")`` unless a consumer needs
+        others (``identify arx --input p_a`` needs ``t``, ``p_a`` and its output).
 
     Raises
     ------
@@ -110,11 +115,13 @@ class Recording:
     data: Mapping[str, np.ndarray]
     metadata: Mapping[str, str]
     source: str = "<memory>"
+    required: tuple[str, ...] = field(default=REQUIRED_COLUMNS, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         columns, data, metadata = _normalize(self.columns, self.data, self.metadata,
                                              self.source, Where())
-        _validate(columns, data, metadata, self.source, Where())
+        object.__setattr__(self, "required", _required(self.required))
+        _validate(columns, data, metadata, self.source, Where(), self.required)
         for array in data.values():
             array.flags.writeable = False
         object.__setattr__(self, "columns", columns)
@@ -155,7 +162,7 @@ class Recording:
         return cls(tuple(data), data, meta, source)
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> "Recording":
+    def load(cls, path: str | os.PathLike[str], **options: Any) -> "Recording":
         """Load a recording, choosing the reader from the suffix.
 
         Parameters
@@ -163,6 +170,9 @@ class Recording:
         path : str or path-like
             A ``.csv`` or ``.txt`` file (:meth:`from_csv`) or a ``.mat`` file
             (:meth:`from_mat`).
+        **options
+            ``columns``, ``window``, ``required``, ``plant``, ``plausible``: see
+            :func:`load_recording`.
 
         Returns
         -------
@@ -186,10 +196,10 @@ class Recording:
                 f"unknown recording file type '{path.suffix or '(no suffix)'}': expected "
                 "a .csv or .txt file (comma separated) or a MATLAB .mat file",
                 source=str(path))
-        return cls.from_csv(path) if kind == "csv" else cls.from_mat(path)
+        return cls.from_csv(path, **options) if kind == "csv" else cls.from_mat(path, **options)
 
     @classmethod
-    def from_csv(cls, path: str | os.PathLike[str]) -> "Recording":
+    def from_csv(cls, path: str | os.PathLike[str], **options: Any) -> "Recording":
         """Read a CSV recording (formats.md section 3).
 
         The file has optional ``# key: value`` metadata lines, then a header naming the
@@ -202,6 +212,8 @@ class Recording:
         ----------
         path : str or path-like
             The CSV file.
+        **options
+            As for :func:`load_recording`.
 
         Returns
         -------
@@ -213,10 +225,10 @@ class Recording:
             Naming the file, the 1-based line (counting metadata and header lines) and
             column, and the problem.
         """
-        return _checked(*read_csv(Path(path)))
+        return _checked(*read_csv(Path(path)), **options)
 
     @classmethod
-    def from_mat(cls, path: str | os.PathLike[str]) -> "Recording":
+    def from_mat(cls, path: str | os.PathLike[str], **options: Any) -> "Recording":
         """Read a MATLAB ``.mat`` recording (v4 to v7; not v7.3).
 
         Variables named as the columns (``t``, ``u``, ``x``, ...) are vectors of one
@@ -228,6 +240,8 @@ class Recording:
         ----------
         path : str or path-like
             The ``.mat`` file.
+        **options
+            As for :func:`load_recording`.
 
         Returns
         -------
@@ -239,7 +253,7 @@ class Recording:
             Naming the file, the variable (and 1-based element) and the problem, also
             for MATLAB v7.3 (HDF5) files, which must be saved again with ``-v7``.
         """
-        return _checked(*read_mat(Path(path)))
+        return _checked(*read_mat(Path(path)), **options)
 
     # ---- access ---------------------------------------------------------------------
     @property
@@ -316,7 +330,7 @@ class Recording:
         data: dict[str, Any] = dict(self.data)
         data.update(arrays)
         columns = self.columns + tuple(n for n in arrays if n not in self.data)
-        return Recording(columns, data, self.metadata, self.source)
+        return Recording(columns, data, self.metadata, self.source, self.required)
 
     def to_pandas(self) -> "pandas.DataFrame":
         """Return the signals as a :class:`pandas.DataFrame` indexed by ``t`` (s).
@@ -375,15 +389,35 @@ class Recording:
         return path
 
 
-def load_recording(path: str | os.PathLike[str]) -> Recording:
+def load_recording(path: str | os.PathLike[str], *, columns: Any = None,
+                   window: tuple[float | None, float | None] | None = None,
+                   required: tuple[str, ...] | None = None, plant: Any = None,
+                   plausible: bool = True) -> Recording:
     """Load a recording from a ``.csv``, ``.txt`` or ``.mat`` file.
 
-    Same as :meth:`Recording.load`.
+    Same as :meth:`Recording.load`. Units are converted to SI where the file or
+    ``columns`` says so (:mod:`workbench.recording_units`), and the result is checked
+    for plausibility: a file in the wrong units is refused with a hint, never read as
+    a different run.
 
     Parameters
     ----------
     path : str or path-like
         The file.
+    columns : str or mapping, optional
+        Column mapping ``"x=pos_mm:mm,t=time_ms:ms"`` (target = file column, optional
+        unit), see :func:`workbench.recording_units.parse_column_map`.
+    window : (float or None, float or None), optional
+        Keep only the samples with ``t0 <= t <= t1`` (s, after unit conversion; None
+        is open). Plausibility is checked on the window, so a window can leave out a
+        gap or a bad start.
+    required : tuple of str, optional
+        Columns that must be present (default ``t``, ``u``, ``x``); ``t`` always is.
+    plant : Plant or PlantParams, optional
+        Also check the position against the stroke and the command against the valve's
+        range (:func:`workbench.recording_units.check_against_plant`).
+    plausible : bool, optional
+        Check sample step, gaps, ``sample_time`` and unit plausibility (default True).
 
     Returns
     -------
@@ -394,17 +428,82 @@ def load_recording(path: str | os.PathLike[str]) -> Recording:
     InputError
         Naming the file, the line or variable and column, and the problem.
     """
-    return Recording.load(path)
+    return Recording.load(path, columns=columns, window=window, required=required,
+                          plant=plant, plausible=plausible)
 
 
 # --------------------------------------------------------------------------------------
 # Normalisation and validation, shared by every way in
 # --------------------------------------------------------------------------------------
-def _checked(columns: Any, data: Any, metadata: Any, source: str, where: Where) -> Recording:
+def _checked(raw_columns: Any, data: Any, metadata: Any, source: str, where: Where, *,
+             columns: Any = None, window: Any = None, required: Any = None,
+             plant: Any = None, plausible: bool = True) -> Recording:
     """A recording from a reader's raw result, checked with the file's locations."""
-    columns_t, data_n, meta = _normalize(columns, data, metadata, source, where)
-    _validate(columns_t, data_n, meta, source, where)
-    return Recording(columns_t, data_n, meta, source)
+    need = _required(required)
+    names, data, metadata = apply_units(list(raw_columns), data, metadata, source, where,
+                                        parse_column_map(columns))
+    columns_t, data_n, meta = _normalize(names, data, metadata, source, where)
+    _validate(columns_t, data_n, meta, source, where, need)
+    if window is not None:
+        data_n, where = _window(data_n, window, source, where)
+    if plausible:
+        check_plausible(data_n, meta, source, where)
+    if plant is not None:
+        check_against_plant(data_n, getattr(plant, "params", plant), source, where)
+    return Recording(columns_t, data_n, meta, source, need)
+
+
+def _required(required: Any) -> tuple[str, ...]:
+    """Required columns as a tuple that starts with 't'."""
+    if required is None:
+        return REQUIRED_COLUMNS
+    names = (required,) if isinstance(required, str) else tuple(required)
+    return ("t",) + tuple(n for n in dict.fromkeys(names) if n != "t")
+
+
+class _Shifted(Where):
+    """Locations of a window: sample k of the window is sample k + offset of the file."""
+
+    def __init__(self, inner: Where, offset: int) -> None:
+        self.inner, self.offset = inner, offset
+
+    def header(self) -> str | None:
+        return self.inner.header()
+
+    def column(self, name: str) -> str:
+        return self.inner.column(name)
+
+    def sample(self, index: int) -> str:
+        return self.inner.sample(index + self.offset)
+
+    def cell(self, name: str, index: int) -> str:
+        return self.inner.cell(name, index + self.offset)
+
+    def meta(self, key: str) -> str:
+        return self.inner.meta(key)
+
+
+def _window(data: dict[str, np.ndarray], window: Any, source: str, where: Where
+            ) -> tuple[dict[str, np.ndarray], Where]:
+    """Samples with t0 <= t <= t1, and locations that still name the file's lines."""
+    try:
+        t0, t1 = window
+        lo = -math.inf if t0 is None else float(t0)
+        hi = math.inf if t1 is None else float(t1)
+    except (TypeError, ValueError):
+        raise InputError(f"time window {window!r} is not (t0, t1) in s",
+                         source=source) from None
+    if math.isnan(lo) or math.isnan(hi) or lo >= hi:
+        raise InputError(f"time window [{lo:g}, {hi:g}] s is empty: t0 < t1 is needed",
+                         source=source)
+    t = data["t"]
+    keep = np.flatnonzero((t >= lo) & (t <= hi))
+    if keep.size < 2:
+        raise InputError(f"time window [{lo:g}, {hi:g}] s holds {keep.size} sample(s); the "
+                         f"recording spans {float(t[0]):.6g}..{float(t[-1]):.6g} s",
+                         source=source, location=where.column("t"))
+    first, last = int(keep[0]), int(keep[-1]) + 1
+    return {k: v[first:last] for k, v in data.items()}, _Shifted(where, first)
 
 
 def _normalize(columns: Any, data: Any, metadata: Any, source: str,
@@ -460,9 +559,10 @@ def _normalize(columns: Any, data: Any, metadata: Any, source: str,
 
 
 def _validate(columns: tuple[str, ...], data: Mapping[str, np.ndarray],
-              metadata: Mapping[str, str], source: str, where: Where) -> None:
+              metadata: Mapping[str, str], source: str, where: Where,
+              required: tuple[str, ...] = REQUIRED_COLUMNS) -> None:
     """Check the contract of formats.md section 3; raise on the first violation."""
-    missing = [c for c in REQUIRED_COLUMNS if c not in data]
+    missing = [c for c in required if c not in data]
     if missing:
         listed = ", ".join(f"'{c}'" for c in missing)
         hint = ""
@@ -473,7 +573,8 @@ def _validate(columns: tuple[str, ...], data: Mapping[str, np.ndarray],
         raise InputError(
             f"missing required column{'s' if len(missing) > 1 else ''} {listed}; "
             f"columns found: {', '.join(columns) or '(none)'}; required: "
-            f"{', '.join(REQUIRED_COLUMNS)}{hint}", source=source, location=where.header())
+            f"{', '.join(required)}{hint}{_map_hint(missing)}", source=source,
+            location=where.header())
 
     n = data["t"].shape[0]
     for name in columns:
@@ -534,6 +635,13 @@ def _validate(columns: tuple[str, ...], data: Mapping[str, np.ndarray],
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"sample_time must be a positive number of seconds, got "
                              f"{text!r}", source=source, location=where.meta("sample_time"))
+
+
+def _map_hint(missing: list[str]) -> str:
+    """How to name a logger's columns."""
+    example = ",".join(f"{m}=COLUMN" for m in missing[:2])
+    return (f" (a logger's own column names map with --columns {example}, with an "
+            "optional unit: x=pos_mm:mm)")
 
 
 def _pressure_hint(lo: float, hi: float, count: int, n: int) -> str:

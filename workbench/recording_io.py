@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
 import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -110,11 +111,20 @@ Parsed = tuple[list[str], dict[str, np.ndarray], dict[str, str], str, Where]
 # Files
 # --------------------------------------------------------------------------------------
 def _check_file(path: Path) -> None:
-    if not path.exists():
-        raise InputError("file not found", source=str(path))
-    if path.is_dir():
+    try:
+        info = path.stat()
+    except FileNotFoundError:
+        raise InputError("file not found", source=str(path)) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file ({exc.strerror or exc})",
+                         source=str(path)) from None
+    if stat.S_ISDIR(info.st_mode):
         raise InputError("is a directory, expected a recording file", source=str(path))
-    if path.stat().st_size == 0:
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError("is not a regular file (a FIFO, socket or device): a recording is "
+                         "read twice (a fast pass, and a second one to locate a bad line), "
+                         "so save the stream to a file first", source=str(path))
+    if info.st_size == 0:
         raise InputError("the file is empty", source=str(path))
 
 
@@ -200,6 +210,8 @@ def _parse_header(header: str, line: int, src: str) -> tuple[list[str], str | No
         sep = None
     cells = header.split(sep) if sep else header.split()
     names = [c.strip().strip('"').strip("'").strip() for c in cells]
+    while len(names) > 1 and not names[-1]:
+        names.pop()  # trailing delimiters, as some loggers write them: no column
     location = f"line {line} (header)"
     if all(_is_number(c) for c in names):
         raise InputError(f"the first line that is not a '#' comment holds numbers "
@@ -255,6 +267,8 @@ def _fast_parse(fh: Any, ncols: int, sep: str | None
         return ("line", int(match.group(1))) if match else None
     except Exception:  # malformed somewhere: the slow path finds and reports where
         return None
+    if frame.shape[1] > ncols and frame.iloc[:, ncols:].isna().all(axis=None):
+        frame = frame.iloc[:, :ncols]  # trailing delimiters: empty cells after the last
     if frame.shape[1] != ncols or frame.shape[0] < 1:
         return None
     arrays = []
@@ -301,6 +315,8 @@ def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | Non
             if only_line is not None and lineno != only_line:
                 continue
             cells = text.split(sep) if sep else text.split()
+            while len(cells) > ncols and not cells[-1].strip():
+                cells.pop()  # a trailing delimiter
             if len(cells) != ncols:
                 raise InputError(f"{len(cells)} cells in this row but the header has "
                                  f"{ncols} ({','.join(columns)})", source=src,

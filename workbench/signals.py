@@ -286,8 +286,10 @@ def fit_signals(measured: Recording, model: Recording | Mapping[str, Any],
 
     Returns
     -------
-    dict of str to float
-        Fit per signal, %, in the order of ``names``.
+    dict of str to float or None
+        Fit per signal, %, in the order of ``names``; ``None`` (JSON ``null``) where the
+        measured signal is constant, since the fit is then undefined (:func:`fit` gives
+        NaN, which is not JSON).
 
     Raises
     ------
@@ -328,8 +330,9 @@ def fit_signals(measured: Recording, model: Recording | Mapping[str, Any],
                 raise InputError(f"the model has no signal '{n}'; it has: "
                                  f"{', '.join(map(str, model_data))}", source=src,
                                  location=f"signal '{n}'")
-    return {n: fit(measured.data[n], model_data[n], source=src,
-                   location=f"signal '{n}'") for n in selected}
+    fits = {n: fit(measured.data[n], model_data[n], source=src, location=f"signal '{n}'")
+            for n in selected}
+    return {n: (None if math.isnan(v) else v) for n, v in fits.items()}
 
 
 # ---------------------------------------------------------------------- whiteness

@@ -546,6 +546,8 @@ def validate(plant, controller=None, spec: Specification | None = None,
     if controller is None:
         from .controllers import from_plant
         controller = from_plant(plant)
+    from .plausibility import check_controller
+    check_controller(plant, controller)           # a centre command that centres the valve
     spec = Specification() if spec is None else spec
     if not isinstance(spec, Specification):
         raise InputError(f"spec must be a validate.Specification, got {type(spec).__name__}")

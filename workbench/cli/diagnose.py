@@ -43,6 +43,8 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=positive_int, metavar="N",
                    help="processes for the candidate refits (default: all cores)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html/.pdf")
+    from .recording_args import add_recording_options
+    add_recording_options(p)
     p.set_defaults(func=_diagnose)
 
 
@@ -52,7 +54,10 @@ def _diagnose(args: argparse.Namespace) -> int:
     verbose = not args.quiet and not args.json
     if verbose:
         print(f"diagnosing {args.recording} on {args.plant} ...", file=sys.stderr, flush=True)
-    d = diagnose(args.plant, args.recording, effects=args.effects, workers=args.workers,
+    from ..params import PlantParams
+    from .recording_args import load_from_args
+    rec = load_from_args(args, args.recording, plant=PlantParams.from_toml(args.plant))
+    d = diagnose(args.plant, rec, effects=args.effects, workers=args.workers,
                  mode=args.mode, verbose=verbose)
     paths = d.write(args.out, report=not args.no_report)
     if args.json:

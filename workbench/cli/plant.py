@@ -15,8 +15,11 @@ __all__ = ["register"]
 def register(subparsers) -> None:
     """Add ``check`` and ``linearize`` to ``workbench``'s sub-parsers."""
     c = subparsers.add_parser("check", help="validate a plant file and print a summary",
-                              description="Validate PLANT.toml (formats.md sections 1-2) and "
-                                          "print areas, volumes, maximum force, valve flow at "
+                              description="Validate PLANT.toml (formats.md sections 1-2), "
+                                          "check its physical plausibility (valve flows "
+                                          "within the ISO 6358 limit of the stated "
+                                          "conductance, controller period vs the fastest "
+                                          "pole, memory of a run) and print areas, volumes, maximum force, valve flow at "
                                           "full opening (l/min ANR) and the effects that are "
                                           "switched on.",
                               epilog=EPILOG)
@@ -42,10 +45,12 @@ def register(subparsers) -> None:
 def _check(args: argparse.Namespace) -> int:
     from .. import units
     from ..plant import Plant
+    from ..plausibility import check_plant
     plant = Plant.from_toml(args.plant)
     s = plant.to_dict()
+    plaus = check_plant(plant)
     if args.json:
-        print(json.dumps(s, indent=2))
+        print(json.dumps({**s, "plausibility": plaus.to_dict()}, indent=2))
         return 0
     prm = plant.params
     rows = [
@@ -66,6 +71,7 @@ def _check(args: argparse.Namespace) -> int:
         ("states", f"{len(s['states'])}: {', '.join(s['states'][:8])}"
                    + (" ..." if len(s["states"]) > 8 else "")),
         ("controller", ", ".join(f"{k}={v}" for k, v in s["controller"].items()) or "none"),
+        ("plausibility", plaus.summary().replace("\n", "; ")),
     ]
     width = max(len(r[0]) for r in rows)
     print("plant file OK")

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from .common import EPILOG, prepare_output
+from .recording_args import add_recording_options
 
 __all__ = ["register"]
 
@@ -33,16 +34,18 @@ def register(subparsers) -> None:
                    help="force closed-loop or open-loop replay (default: auto)")
     s.add_argument("--no-plot", action="store_true", help="do not write simulation.png")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_recording_options(s)
     s.set_defaults(func=_simulate)
 
 
 def _simulate(args: argparse.Namespace) -> int:
     out_dir = prepare_output(args.out, SIMULATE_FILES, [args.plant, args.recording])
     from ..plant import Plant
-    from ..recording import Recording, fit_signals
+    from ..recording import fit_signals
     from ..replay import replay
     plant = Plant.from_toml(args.plant)
-    rec = Recording.load(args.recording)
+    from .recording_args import load_from_args
+    rec = load_from_args(args, args.recording, plant=plant)
     if not args.quiet:              # a line even where no progress bar is drawn (no tty)
         print(f"simulate: replaying {len(rec)} samples ({rec.duration:.3g} s) of "
               f"{args.recording} ...", file=sys.stderr, flush=True)
@@ -54,8 +57,9 @@ def _simulate(args: argparse.Namespace) -> int:
                                                f"{Path(args.recording).name}")
     print(f"{mode} replay of {args.recording} ({len(rec)} samples, {rec.duration:.3g} s)")
     for k, v in fits.items():
-        print(f"  fit {k:<4} " + (f"{v:7.2f} %" if v == v else "    n/a (the recorded "
-                                   "signal is constant: NRMSE undefined)"))
+        print(f"  fit {k:<4} " + (f"{v:7.2f} %" if v is not None and v == v else
+                                   "    n/a (the recorded signal is constant: NRMSE "
+                                   "undefined)"))
     print(f"wrote {out_dir / 'simulation.csv'} and {out_dir / 'fit.json'}")
     return 0
 

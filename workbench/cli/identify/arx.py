@@ -82,6 +82,8 @@ def add_arx(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--out", metavar="DIR",
                    help="also write DIR/arx.json, DIR/residuals.png and DIR/validation.png")
+    from ..recording_args import add_recording_options
+    add_recording_options(p)
     p.set_defaults(func=_cmd_arx)
     return p
 
@@ -117,9 +119,9 @@ def _cmd_arx(args: argparse.Namespace) -> int:
 def _arx_data(args: argparse.Namespace):
     """The recording, output and input columns, and the number of estimation samples."""
     import numpy as np
-    from ...recording import load_recording
+    from ..recording_args import load_from_args
 
-    rec = load_recording(args.recording)
+    rec = load_from_args(args, args.recording, required=("t",))  # input, output: checked below
     for role, col in (("input", args.input), ("output", args.output)):
         if not rec.has(col):
             raise InputError(f"no column '{col}' for the {role}; the recording has: "

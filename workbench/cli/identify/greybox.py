@@ -58,6 +58,8 @@ def add_greybox(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--verbose", action="store_true", help="print IPOPT's iteration log")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from ..recording_args import add_recording_options
+    add_recording_options(p)
     p.set_defaults(func=_cmd_greybox)
 
 
@@ -86,9 +88,9 @@ def _cmd_greybox(args) -> int:
     from ...identify.grey_box import estimate
     from ...output import strict_json
     from ...plant import Plant
-    from ...recording import load_recording
+    from ..recording_args import load_from_args
     plant = Plant.from_toml(args.plant)
-    recs = [load_recording(p) for p in args.recordings]
+    recs = [load_from_args(args, p, plant=plant) for p in args.recordings]
     if not (args.quiet or args.json):   # a line even where no progress bar is drawn (no tty)
         import sys
         print(f"greybox: estimating {', '.join(args.params)} from {len(recs)} recording(s) "

@@ -60,6 +60,8 @@ def add_rls(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--no-plot", action="store_true", help="do not write rls.png")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from ..recording_args import add_recording_options
+    add_recording_options(p)
     p.set_defaults(func=_cmd_rls)
     return p
 
@@ -87,12 +89,13 @@ def _parse_forgetting(text: str, npar: int) -> float | None:
 
 
 def _cmd_rls(args: argparse.Namespace) -> int:
-    from ...recording import UNITS, load_recording
+    from ...recording import UNITS
     from ...identify.rls.estimator import default_burn_in
+    from ..recording_args import load_from_args
     out = prepare_output(args.out, RLS_FILES, [args.recording])
     npar = args.orders[0] + args.orders[1]
     lam = _parse_forgetting(args.forgetting, max(npar, 1))
-    rec = load_recording(args.recording)
+    rec = load_from_args(args, args.recording, required=("t",))  # input, output: checked below
     for opt, col in (("--input", args.input), ("--output", args.output)):
         if col not in rec.columns:
             raise InputError(f"{opt} {col}: the recording has no column '{col}'; its columns "

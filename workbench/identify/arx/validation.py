@@ -128,7 +128,11 @@ class ArxValidation:
         }
 
 
-def validate(model: ArxModel, y: Any, u: Any, lags: int = 25) -> ArxValidation:
+#: Default largest correlation lag, samples (MATLAB's ``resid``).
+DEFAULT_LAGS = 25
+
+
+def validate(model: ArxModel, y: Any, u: Any, lags: int | None = None) -> ArxValidation:
     """Simulate ``model`` on data and analyse its one-step residuals.
 
     Use held-out data (not the estimation data) for the fit: a model that only fits
@@ -141,8 +145,10 @@ def validate(model: ArxModel, y: Any, u: Any, lags: int = 25) -> ArxValidation:
     y, u : array_like, shape (n,)
         Output and input, units of the model.
     lags : int, optional
-        Largest correlation lag M, samples (default 25, as MATLAB's ``resid``); reduced
-        to a quarter of the residuals if the data are short.
+        Largest correlation lag M, samples. By default 25 (as MATLAB's ``resid``),
+        reduced to a quarter of the residuals if the data are short; a value given
+        must be at most a quarter of the residuals (a correlation at lag M averages
+        only N - M products, and the portmanteau tests assume M << N).
 
     Returns
     -------
@@ -153,8 +159,9 @@ def validate(model: ArxModel, y: Any, u: Any, lags: int = 25) -> ArxValidation:
     Raises
     ------
     InputError
-        For NaN/inf, mismatched lengths, or fewer than ``model.max_lag + 8`` samples
-        (too few residuals for a correlation test).
+        For NaN/inf, mismatched lengths, fewer than ``model.max_lag + 8`` samples
+        (too few residuals for a correlation test), or ``lags`` beyond a quarter of
+        the residuals.
 
     Notes
     -----
@@ -168,11 +175,15 @@ def validate(model: ArxModel, y: Any, u: Any, lags: int = 25) -> ArxValidation:
     if not isinstance(model, ArxModel):
         raise InputError(f"validate needs an ArxModel, got {type(model).__name__}")
     yy, uu = _data(y, u, "validate")
-    lag_max = _order("lags", lags, 1)
+    lag_max = DEFAULT_LAGS if lags is None else _order("lags", lags, 1)
     n0 = model.max_lag
     if yy.size < n0 + 8:
         raise InputError(f"validate: {yy.size} samples are too few for a model with max "
                          f"lag {n0}; need at least {n0 + 8} (8 residuals)")
+    if lags is not None and lag_max > (yy.size - n0) // 4:
+        raise InputError(f"lags = {lag_max} is more than a quarter of the "
+                         f"{yy.size - n0} residuals of these data; give at most "
+                         f"{max(1, (yy.size - n0) // 4)} (or leave the default)")
     y_sim = model.simulate(uu, y0=yy[:n0])
     fit = _fit_percent(yy[n0:], y_sim[n0:])
     e = yy[n0:] - model.predict(yy, uu)[n0:]

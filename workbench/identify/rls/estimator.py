@@ -369,8 +369,10 @@ def rls(y: Any, u: Any, orders: Sequence[int], forgetting: float = 0.99,
         Bound on ``trace(P)`` against wind-up (module notes); default
         ``trace(P(0)) / forgetting``; ``numpy.inf`` switches it off.
     method : {"auto", "casadi", "numpy"}
-        ``"auto"``/``"casadi"``: the CasADi loop (C when a compiler is present);
-        ``"numpy"``: the plain per-sample numpy loop (slow; reference).
+        ``"casadi"``: the CasADi loop (C when a compiler is present; refused above 16
+        parameters, whose symbolic step takes minutes to compile); ``"numpy"``: the
+        plain per-sample numpy loop (reference); ``"auto"``: CasADi up to 8 parameters,
+        beyond that whichever the cost model says is faster for the record length.
     progress : bool
         Show a progress bar (CasADi loop only; costs nothing measurable).
 
@@ -410,7 +412,7 @@ def rls(y: Any, u: Any, orders: Sequence[int], forgetting: float = 0.99,
     p0_arr = _initial_covariance(p0, phi, npar)
     pm = _trace_bound(p_max, p0_arr, lam)
     x0 = _pack(th0, np.diag(p0_arr), np.zeros((npar, npar)), 0.0, 0.0)
-    if method == "numpy":
+    if _choose_method(method, npar, target.size) == "numpy":
         out, xf = _run_numpy(phi, target, x0, lam, pm)
         kind = "numpy"
     else:
@@ -422,6 +424,34 @@ def rls(y: Any, u: Any, orders: Sequence[int], forgetting: float = 0.99,
                      covariance=_final_covariance(xf, n), names=names, orders=orders,
                      forgetting=lam, p0=tuple(float(v) for v in p0_arr), p_max=pm, sample_time=sample_time,
                      start_index=k0, method=kind)
+
+
+#: Cost model of the two loops (measured: 2 cores, gcc -O2): the numpy loop takes about
+#: 1.5e-4 s per sample for up to 40 parameters; building and compiling the CasADi step
+#: takes about 2 s at 8 parameters and grows as npar**3 (its symbolic covariance update
+#: is n x n x n products: 6.9 s at 12 parameters, minutes at 40).
+_NUMPY_SECONDS_PER_SAMPLE = 1.5e-4
+_COMPILE_SECONDS_AT_8 = 2.0
+#: Above this many parameters ``method="casadi"`` is refused (compiling would take
+#: minutes; the numpy loop is then the faster way at any record length of minutes).
+_CASADI_MAX_PARAMETERS = 16
+
+
+def _choose_method(method: str, npar: int, nsamples: int) -> str:
+    """``"numpy"`` or ``"casadi"``: ``"auto"`` keeps the compiled loop up to 8 parameters
+    and beyond that takes whichever the cost model says is faster for this record."""
+    compile_s = _COMPILE_SECONDS_AT_8 * (npar / 8.0) ** 3
+    if method == "casadi" and npar > _CASADI_MAX_PARAMETERS:
+        raise InputError(f"method='casadi' with {npar} parameters would spend about "
+                         f"{compile_s:.0f} s building and compiling the symbolic step "
+                         "(its cost grows as the cube of the parameters); use "
+                         "method='auto' or 'numpy'")
+    if method != "auto":
+        return method
+    from .kernels import _CHUNK_FUNCTIONS
+    if npar <= 8 or npar in _CHUNK_FUNCTIONS:
+        return "casadi"
+    return "numpy" if nsamples * _NUMPY_SECONDS_PER_SAMPLE < compile_s else "casadi"
 
 
 def _initial_estimate(theta0: Any, names: tuple[str, ...]) -> np.ndarray:
