@@ -14,7 +14,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "workbench"
 #: Distributions of pyproject's optional extras (import names).
-OPTIONAL = ("do_mpc",)
+OPTIONAL = ("do_mpc", "numba", "osqp")
 
 
 def _module_level_imports(tree: ast.Module) -> set[str]:

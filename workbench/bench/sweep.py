@@ -1,4 +1,5 @@
-"""``workbench bench sweep``: the stability map against a per-point python-control loop.
+"""``workbench bench sweep``: the stability map against a point-by-point loop with the
+model built once.
 
 Timing numbers are for this machine at the time of the run; the ratios are what to
 compare between runs. Nothing here is a test.
@@ -6,12 +7,13 @@ compare between runs. Nothing here is a test.
 
 from __future__ import annotations
 
-import os
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+
+from .timing import baseline, interleaved, machine, summary
 
 __all__ = ["bench"]
 
@@ -19,18 +21,24 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def bench(quick: bool = False) -> dict:
-    """``workbench bench sweep``: a 200 x 200 map (position x supply pressure, so every
-    point has its own equilibrium, tangent model, ZOH discretisation and eigenvalues) on
-    the paper-000 rig, against a plain python loop of the same steps through the
-    workbench's per-point API and python-control (ss, c2d, feedback, poles) on a
-    random sample of the points, in the same run. Also checks the two agree.
-    ``quick``: 60 x 60 points, 30 of them in the loop."""
+    """A 200 x 200 map (position x supply pressure: every point its own equilibrium,
+    tangent, ZOH discretisation and eigenvalues) on the paper-000 rig, ``quick``: 60 x 60.
+
+    Ours: :func:`workbench.stability.maps.stability_map` (warm: compiled kernels from the
+    cache). Baselines, on a random sample of the points (100, quick 30), extrapolated to
+    the whole map: ``loop_model_built_once`` (:mod:`.baselines_sweep`: plant built once,
+    equilibrium per point, numpy ZOH and eigenvalues) and the old
+    ``python_control_loop`` (plant rebuilt per point, python-control c2d/feedback/poles).
+    ``error``: the largest |rho| difference between the map and the model-built-once loop
+    on the sample (-).
+    """
     import control
 
     from ..controllers import from_plant
     from ..linearize import operating_point, tangent
     from ..plant import Plant
     from ..stability.maps import Axis, stability_map
+    from .baselines_sweep import pointwise_rho
     plant = Plant.from_toml(ROOT / "designs" / "plants" / "situm_rodless.toml")
     n = 60 if quick else 200
     xa = Axis.linspace("position", 0.05, 0.45, n)
@@ -38,30 +46,44 @@ def bench(quick: bool = False) -> dict:
     t0 = time.perf_counter()
     stability_map(plant, xa, ya, progress=False)           # compiles (or loads the cache)
     first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    m = stability_map(plant, xa, ya, progress=False)
-    warm = time.perf_counter() - t0
     ctrl = from_plant(plant)
-    c_tf = ctrl.to_control()
     rng = np.random.default_rng(0)
     sample = rng.choice(n * n, 30 if quick else 100, replace=False)
+    iy, ix = np.divmod(sample, n)
+    px, pp = xa.values[ix], ya.values[iy]
+    scale = n * n / len(sample)
+    res, stats = interleaved({"ours": lambda: stability_map(plant, xa, ya, progress=False),
+                              "loop": lambda: pointwise_rho(plant, px, pp, ctrl)},
+                             repeats=2 if quick else 3, warmup=False)
+    m = res["ours"]
+    err = float(np.max(np.abs(res["loop"] - m.rho[iy, ix])))
+    loop_stats = {k: v * scale if isinstance(v, float) else v
+                  for k, v in stats["loop"].items() if k != "spread"}
+    med = stats["ours"]["median_s"]
+    rows = {"loop_model_built_once": baseline(
+        loop_stats, med, err, "python loop over the points, plant built once: workbench "
+        "operating_point, one CasADi Jacobian function, scipy expm ZOH, numpy eigenvalues; "
+        f"timed on {len(sample)} points and extrapolated")}
+    c_tf = ctrl.to_control()
     worst = 0.0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for k in sample:
-            iy, ix = divmod(int(k), n)
-            p = plant.with_params(**{"supply.pressure": float(ya.values[iy])})
-            lin = tangent(p, operating_point(p, float(xa.values[ix])))
+        for jy, jx in zip(iy, ix):
+            p = plant.with_params(**{"supply.pressure": float(ya.values[jy])})
+            lin = tangent(p, operating_point(p, float(xa.values[jx])))
             c, d = lin.output("x")
             sd = control.c2d(control.ss(lin.A, lin.B, c, d), ctrl.sample_time, "zoh")
             poles = control.poles(control.feedback(c_tf * sd, 1))
-            # the loop sees the hidden pressure-sum mode at |z| = 1; compare the rest
             poles = poles[np.abs(np.abs(poles) - 1.0) > 1e-6]
-            worst = max(worst, abs(float(np.max(np.abs(poles))) - float(m.rho[iy, ix])))
-    per_point = (time.perf_counter() - t0) / len(sample)
-    return {"points": n * n, "points_per_s": n * n / warm,
-            "speedup_vs_loop": per_point * n * n / warm,
-            "map_s": warm, "first_run_s": first, "loop_points_per_s": 1.0 / per_point,
-            "loop_sample": int(len(sample)), "max_abs_rho_difference": worst,
-            "workers": os.cpu_count(), "target": ">= 20000 points/s and >= 50x the loop"}
+            worst = max(worst, abs(float(np.max(np.abs(poles))) - float(m.rho[jy, jx])))
+    wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    rows["python_control_loop"] = baseline(
+        summary([wall * scale], [cpu * scale]), med, worst,
+        "old baseline: plant rebuilt per point (with_params), python-control ss/c2d/"
+        "feedback/poles; one run on the sample, extrapolated")
+    return {"benchmark": "sweep", **stats["ours"], "error": err,
+            "error_note": "largest |rho| difference from the model-built-once loop (-)",
+            "points": n * n, "points_per_s": n * n / med, "first_run_s": first,
+            "loop_sample": int(len(sample)), "baselines": rows,
+            "target": ">= 20000 points/s", "machine": machine()}

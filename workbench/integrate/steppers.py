@@ -70,7 +70,7 @@ def _common_denominator(b, largest: int = 24) -> int | None:
 
 
 def rosenbrock(tableau: RosenbrockTableau, f: Callable, x, h: float, fx=None, jacobian=None,
-               solve: Callable | None = None):
+               solve: Callable | None = None, error: bool = False):
     """One Rosenbrock step x -> x+ (see :class:`RosenbrockTableau` for both forms).
 
     Parameters
@@ -83,8 +83,14 @@ def rosenbrock(tableau: RosenbrockTableau, f: Callable, x, h: float, fx=None, ja
         (form "w"); default the unpivoted LU of :mod:`.linalg` of I/(h gamma) - J,
         written out in SX and factorised once per step.
 
+    error : also return the embedded error estimate sum_i e_i k_i (a vector like x, in
+        the units of x; the tableau must have error weights ``e``): ``(x+, err)``.
+
     A stage whose argument equals the previous one reuses its f (ROS4's stages 3, 4).
+    The step ``h`` may be an expression (a step size chosen at run time).
     """
+    if error and not tableau.e:
+        raise ValueError(f"{tableau.name} has no embedded error estimate")
     fx = f(x) if fx is None else fx
     J = ca.jacobian(fx, x) if jacobian is None else jacobian
     gh = tableau.gamma * h
@@ -116,8 +122,12 @@ def rosenbrock(tableau: RosenbrockTableau, f: Callable, x, h: float, fx=None, ja
         for mi, ki in zip(tableau.m, k):
             if mi:
                 x_next = x_next + mi * h * ki
+    else:
+        x_next = x + sum(mi * ki for mi, ki in zip(tableau.m, k) if mi)
+    if not error:
         return x_next
-    return x + sum(mi * ki for mi, ki in zip(tableau.m, k) if mi)
+    err = sum((ei * h if w_form else ei) * ki for ei, ki in zip(tableau.e, k) if ei)
+    return x_next, err
 
 
 def _radau_constants():

@@ -112,6 +112,9 @@ class RosenbrockTableau:
     gamma : diagonal coefficient. a, c : strictly lower rows (row i has i entries).
     m : weights of the stages. order : classical order. stability : in words.
     form : ``"hw"`` or ``"w"``, the normalisation above.
+    e : weights of the embedded error estimate, err = sum_i e_i k_i (the difference
+        between the method and an embedded one of order ``order - 1``); empty when
+        the method has none.
     """
 
     name: str
@@ -122,10 +125,13 @@ class RosenbrockTableau:
     order: int
     stability: str
     form: str = "hw"
+    e: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if self.form not in ("hw", "w"):
             raise ValueError(f"form must be 'hw' or 'w', got {self.form!r}")
+        if self.e and len(self.e) != len(self.m):
+            raise ValueError(f"{self.name}: {len(self.e)} error weights for {len(self.m)} stages")
 
     @property
     def stages(self) -> int:
@@ -140,7 +146,8 @@ ROS2 = RosenbrockTableau(name="ros2", gamma=1.0 + 1.0 / math.sqrt(2.0), a=((), (
                          stability="L-stable, order 2 for any Jacobian approximation", form="w")
 
 #: ROS4: the 4-stage method of order 4 of Hairer & Wanner (Solving ODEs II, sec. IV.7;
-#: the L-stable choice of ros4.f); stages 3 and 4 share one f.
+#: the L-stable choice of ros4.f); stages 3 and 4 share one f. ``e``: ros4.f's embedded
+#: error estimate (x+ minus a solution of order 3; local error O(h^4)).
 ROS4 = RosenbrockTableau(
     name="ros4",
     gamma=0.57282,
@@ -150,7 +157,8 @@ ROS4 = RosenbrockTableau(
        (-2.137148994382534, -0.3214669691237626, -0.6949742501781779)),
     m=(2.255570073418735, 0.2870493262186792, 0.4353179431840180, 1.093502252409163),
     order=4,
-    stability="L-stable")
+    stability="L-stable",
+    e=(-0.2815431932141155, -0.07276199124938920, -0.1082196201495311, -1.093502252409163))
 
 _RODAS_A5 = (1.221224509226641, 6.019134481288629, 12.53708332932087, -0.6878860361058950)
 #: RODAS, 6 stages, order 4, L-stable and stiffly accurate (Hairer & Wanner, rodas.f).

@@ -1,0 +1,96 @@
+"""The benchmarks' JSON (workbench.bench): the common schema in quick mode, and the
+baselines reaching the accuracy they are compared at. Timings are not asserted (the
+machine is shared); the accuracy of every method is, against independent references
+(scipy Radau at rtol 1e-9, the numpy RLS loop, the point-by-point loop)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from workbench.bench import timing
+
+
+def _check_stats(d: dict) -> None:
+    assert d["median_s"] > 0
+    for kind in ("wall_s", "cpu_s"):
+        q = d["spread"][kind]
+        assert q["min"] <= q["q25"] <= q["median"] <= q["q75"] <= q["max"]
+    assert d["spread"]["wall_s"]["median"] == pytest.approx(d["median_s"])
+
+
+def _check_schema(res: dict, name: str) -> None:
+    json.dumps(res)                                    # plain data
+    assert res["benchmark"] == name
+    _check_stats(res)
+    assert "error" in res or "cost" in res
+    assert res["baselines"], "a benchmark needs at least one baseline"
+    for row in res["baselines"].values():
+        assert {"median_s", "error", "ratio", "description", "available"} <= set(row)
+        if row["available"]:
+            assert row["ratio"] == pytest.approx(row["median_s"] / res["median_s"])
+        else:
+            assert row["reason"] and row["ratio"] is None
+
+
+def test_timing_helpers():
+    calls = []
+    res, stats = timing.interleaved({"a": lambda: calls.append("a") or 1,
+                                     "b": lambda: calls.append("b") or 2}, repeats=3)
+    assert res == {"a": 1, "b": 2}
+    assert calls == ["a", "b"] * 4                     # warm-up, then round-robin
+    assert stats["a"]["spread"]["repeats"] == 3
+    row = timing.baseline({"median_s": 2.0}, 0.5, 1e-3, "x")
+    assert row["ratio"] == 4.0 and row["available"]
+    assert timing.unavailable("x", "why")["ratio"] is None
+
+
+def test_bench_rls_schema_and_baseline_accuracy():
+    from workbench.bench import run
+    res = run("rls", quick=True)
+    _check_schema(res, "rls")
+    # same arithmetic as the numpy loop: differences are rounding (1e-9 of O(1) estimates)
+    assert res["error"] < 1e-9
+    nb = res["baselines"]["numba_loop"]
+    if nb["available"]:
+        assert nb["error"] < 1e-9 and nb["std_rel_difference"] < 1e-6
+    assert res["baselines"]["numpy_loop"]["error"] == 0.0
+
+
+def test_bench_rls_without_numba(monkeypatch):
+    from workbench.bench import baselines_rls, run
+    monkeypatch.setattr(baselines_rls, "unavailable_reason", lambda: "numba is not installed")
+    res = run("rls", quick=True)
+    row = res["baselines"]["numba_loop"]
+    assert not row["available"] and "numba" in row["reason"]
+
+
+def test_bench_sweep_schema_and_agreement():
+    from workbench.bench import run
+    res = run("sweep", quick=True)
+    _check_schema(res, "sweep")
+    # the map and both loops compute the same spectral radius: 1e-9 is rounding in the
+    # equilibrium solve and the eigenvalues
+    assert res["error"] < 1e-9
+    assert res["baselines"]["python_control_loop"]["error"] < 1e-9
+
+
+def test_bench_simulate_case_schema_and_accuracy():
+    # one short case with one rung per ladder (the full bench calibrates on long ladders)
+    from workbench.bench import simulate
+    plant, _ = simulate.cases(quick=True)["rig25_4_states"]
+    res = simulate._case(plant, 1.0, True, cvodes_ladder=(1e-4,), rk4_ladder=(8,))
+    json.dumps(res)
+    _check_stats(res)
+    bound = 1e-3 * plant.stroke
+    assert res["accuracy_bound_m"] == bound
+    assert res["within_bound"] and res["error"] < bound
+    assert res["realtime_factor"] == pytest.approx(1.0 / res["median_s"])
+    assert res["steps"] >= 100 and res["native"] in (True, False)
+    for name in ("cvodes_mapaccum", "rk4_compiled"):
+        row = res["baselines"][name]
+        assert row["available"] and row["within_bound"] and row["error"] <= bound
+        assert row["ratio"] == pytest.approx(row["median_s"] / res["median_s"])
+    assert np.isfinite(res["baselines"]["scipy_lsoda_per_period"]["error"])

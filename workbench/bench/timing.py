@@ -1,0 +1,92 @@
+"""Timing helpers shared by the benchmarks: repeats, medians, spreads, baseline rows.
+
+Every benchmark's result has the same core (``docs``: ``workbench bench NAME --json``)::
+
+    {"benchmark": NAME, "median_s": ..., "spread": {...}, "error" or "cost": ...,
+     "baselines": {name: {"median_s", "error", "ratio", "description", ...}},
+     "machine": {...}, ...details}
+
+``median_s`` is the median wall time of the measured operation over repeats;
+``spread`` gives the minimum, quartiles and maximum of the wall and CPU (thread) times
+over the same repeats. ``ratio`` is the baseline's median over ours (> 1: ours is
+faster). Ours and the baselines are measured interleaved (one repeat of each in turn),
+so load from other processes falls on all of them alike; the ratios are what to compare
+between runs, the absolute times depend on the machine and its load.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+__all__ = ["summary", "interleaved", "baseline", "unavailable", "machine"]
+
+
+def _quantiles(values) -> dict[str, float]:
+    v = np.asarray(values, dtype=float)
+    q = np.percentile(v, [0, 25, 50, 75, 100])
+    return {"min": float(q[0]), "q25": float(q[1]), "median": float(q[2]),
+            "q75": float(q[3]), "max": float(q[4])}
+
+
+def summary(walls, cpus) -> dict[str, Any]:
+    """``median_s`` and ``spread`` (wall and CPU quantiles, s) of repeated timings."""
+    return {"median_s": float(np.median(walls)), "cpu_median_s": float(np.median(cpus)),
+            "spread": {"repeats": len(walls), "wall_s": _quantiles(walls),
+                       "cpu_s": _quantiles(cpus)}}
+
+
+def interleaved(fns: Mapping[str, Callable[[], Any]], repeats: int,
+                warmup: bool = True) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """Run each function ``repeats`` times, round-robin; (last results, :func:`summary` each).
+
+    Wall time by ``time.perf_counter``, CPU time by ``time.thread_time`` (the calling
+    thread: robust to other processes, blind to work in other threads). With
+    ``warmup`` each function runs once first, untimed (first-call costs: page faults,
+    lazy loading).
+    """
+    results: dict[str, Any] = {}
+    if warmup:
+        for name, fn in fns.items():
+            results[name] = fn()
+    walls: dict[str, list[float]] = {k: [] for k in fns}
+    cpus: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(max(1, int(repeats))):
+        for name, fn in fns.items():
+            c0, t0 = time.thread_time(), time.perf_counter()
+            results[name] = fn()
+            walls[name].append(time.perf_counter() - t0)
+            cpus[name].append(time.thread_time() - c0)
+    return results, {k: summary(walls[k], cpus[k]) for k in fns}
+
+
+def baseline(stats: Mapping[str, Any], ours_median_s: float, error: float | None,
+             description: str, **extra: Any) -> dict[str, Any]:
+    """One row of ``baselines``: its median (s), error, ratio to ours, description."""
+    med = float(stats["median_s"])
+    row = {"median_s": med, "cpu_median_s": stats.get("cpu_median_s"),
+           "spread": stats.get("spread"), "error": error,
+           "ratio": med / ours_median_s if ours_median_s > 0 else None,
+           "description": description, "available": True}
+    row.update(extra)
+    return row
+
+
+def unavailable(description: str, reason: str) -> dict[str, Any]:
+    """A baseline row for a baseline that could not run here (``reason`` says why)."""
+    return {"median_s": None, "error": None, "ratio": None, "description": description,
+            "available": False, "reason": reason}
+
+
+def machine() -> dict[str, Any]:
+    """CPU count and 1-minute load average: context for the absolute times."""
+    try:
+        load = float(os.getloadavg()[0])
+    except (AttributeError, OSError):
+        load = None
+    return {"cpus": os.cpu_count(), "load_average_1min": load,
+            "note": "absolute times depend on the machine and its load; compare ratios "
+                    "(measured interleaved in one run); final figures need a quiet machine"}

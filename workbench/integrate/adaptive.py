@@ -1,0 +1,159 @@
+"""Error-controlled stepping: an embedded Rosenbrock step and its step-size controller.
+
+The step (:func:`embedded_step_function`) returns x+ and the scaled norm of the
+embedded error estimate,
+
+    err = max_i |e_i| / (atol_i + rtol max(|x_i|, |x+_i|)),
+
+with e = sum_j e_j k_j the difference between ROS4 (order 4) and its embedded
+order-3 solution (Hairer & Wanner, ros4.f). A step is accepted when err <= 1; the
+next step is h (0.9 err^(-1/4)) clipped to [0.2 h, 5 h] (no growth right after a
+rejection), the standard controller of Hairer & Wanner (Solving ODEs II, IV.8).
+Steps never cross the end of an interval (a control period, where the held command
+jumps), so the discontinuities of a sampled-data loop are stepped onto, not over.
+
+:func:`advance` is the controller in Python (the reference the tests check, and the
+fallback without a C compiler); :data:`ADVANCE_C` is the same controller in C for
+the compiled loop of :mod:`workbench.bench.compiled_loop`.
+
+The tolerance controls the local error per step; the global error it gives is a
+measured result (``workbench bench simulate`` reports it against scipy Radau at
+rtol 1e-9), not a guarantee.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import casadi as ca
+import numpy as np
+
+from .steppers import rosenbrock
+from .tableaux import ROS4, RosenbrockTableau
+
+__all__ = ["embedded_step_function", "advance", "ADVANCE_C", "SAFETY", "FAC_MIN", "FAC_MAX",
+           "MAX_STEPS"]
+
+#: safety factor, smallest and largest step change of the controller
+SAFETY, FAC_MIN, FAC_MAX = 0.9, 0.2, 5.0
+#: steps (accepted + rejected) allowed in one interval before the run is declared failed
+MAX_STEPS = 100_000
+
+
+def embedded_step_function(f: Callable, nx: int, atol: Sequence[float], rtol: float,
+                           tableau: RosenbrockTableau = ROS4,
+                           name: str = "wb_astep") -> ca.Function:
+    """``wb_astep(x, u, h) -> (x+, err)``: one Rosenbrock step of size h (s) and the
+    scaled norm of its embedded error estimate (accept when err <= 1).
+
+    Parameters
+    ----------
+    f : (x, u) -> dx/dt on SX, parameters folded in.
+    nx : number of states.
+    atol : absolute tolerance of each state (its SI unit), length ``nx``.
+    rtol : relative tolerance (-).
+    tableau : a :class:`RosenbrockTableau` with error weights ``e`` (default ROS4).
+    """
+    atol = np.asarray(atol, dtype=float).ravel()
+    if atol.shape != (nx,) or not np.all(atol > 0) or not rtol >= 0:
+        raise ValueError(f"need {nx} positive absolute tolerances and rtol >= 0")
+    x, u, h = ca.SX.sym("x", nx), ca.SX.sym("u"), ca.SX.sym("h")
+    x_next, e = rosenbrock(tableau, lambda z: f(z, u), x, h, error=True)
+    scale = ca.DM(atol) + rtol * ca.fmax(ca.fabs(x), ca.fabs(x_next))
+    err = ca.mmax(ca.fabs(e) / scale)
+    return ca.Function(name, [x, u, h], [ca.densify(ca.cse(x_next)), err])
+
+
+def _factor(err: float, order_embedded: int = 3) -> float:
+    """Step change after an accepted step with error norm ``err``."""
+    if err <= 0.0:
+        return FAC_MAX
+    return min(FAC_MAX, max(FAC_MIN, SAFETY * err ** (-1.0 / (order_embedded + 1))))
+
+
+def advance(step: Callable, x: np.ndarray, u: float, interval: float, h: float
+            ) -> tuple[np.ndarray, float, int, int]:
+    """Integrate over ``interval`` (s) with command ``u`` held, steps chosen by the error.
+
+    Parameters
+    ----------
+    step : ``(x, u, h) -> (x+, err)``, e.g. :func:`embedded_step_function`.
+    x : state at the start. h : first step to try (s), e.g. the last proposal.
+
+    Returns
+    -------
+    (state at the end, next step proposal (s), accepted steps, rejected steps)
+
+    Raises
+    ------
+    FloatingPointError
+        The step size fell below 1e-12 of the interval, or :data:`MAX_STEPS` were taken.
+    """
+    t, acc, rej, rejected_last = 0.0, 0, 0, False
+    h = min(h, interval)
+    while interval - t > 1e-12 * interval:
+        rest = interval - t
+        short = h >= rest * (1.0 - 1e-9)
+        hh = rest if short else h
+        xn, err = step(x, u, hh)
+        xn, err = np.asarray(xn, dtype=float).ravel(), float(err)
+        if not (err <= 1.0 and np.all(np.isfinite(xn))):
+            rej += 1
+            fac = FAC_MIN if not np.isfinite(err) else max(FAC_MIN, SAFETY * err ** -0.25)
+            h, rejected_last = hh * min(fac, 0.9), True
+        else:
+            acc += 1
+            x, t = xn, t + hh
+            fac = min(_factor(err), 1.0) if rejected_last else _factor(err)
+            if not (short and fac >= 1.0):     # a step cut at the end keeps the proposal
+                h = hh * fac
+            rejected_last = False
+        if h < 1e-12 * interval or acc + rej > MAX_STEPS:
+            raise FloatingPointError("the error-controlled step size collapsed")
+        h = min(h, interval)
+    return x, h, acc, rej
+
+
+#: :func:`advance` in C. Needs ``wb_astep`` (from :func:`embedded_step_function`,
+#: generated by CasADi) and the work arrays of the driver (``wb_work``); returns 0, or 3
+#: when the step size collapses, 1 when the step fails.
+ADVANCE_C = r"""
+static int wb_advance(wb_work* m, casadi_real* x, casadi_real u, casadi_real interval,
+                      casadi_real* hp, long long* acc, long long* rej) {
+  casadi_real t = 0., h = *hp, hh, err, fac, xn[WB_NX];
+  int i, rejected_last = 0, shortstep, ok;
+  long long nsteps = 0;
+  if (h > interval) h = interval;
+  while (interval - t > 1e-12 * interval) {
+    shortstep = h >= (interval - t) * (1. - 1e-9);
+    hh = shortstep ? interval - t : h;
+    m->arg[0] = x; m->arg[1] = &u; m->arg[2] = &hh;
+    m->res[0] = xn; m->res[1] = &err;
+    if (wb_astep(m->arg, m->res, m->iw, m->w, 0)) return 1;
+    ok = err <= 1.;
+    for (i = 0; i < WB_NX && ok; ++i) ok = xn[i] - xn[i] == 0.;
+    if (!ok) {
+      ++*rej;
+      fac = (err - err == 0.) ? WB_SAFETY * pow(err, -0.25) : WB_FAC_MIN;
+      if (fac < WB_FAC_MIN) fac = WB_FAC_MIN;
+      if (fac > 0.9) fac = 0.9;
+      h = hh * fac;
+      rejected_last = 1;
+    } else {
+      ++*acc;
+      for (i = 0; i < WB_NX; ++i) x[i] = xn[i];
+      t += hh;
+      fac = err > 0. ? WB_SAFETY * pow(err, -0.25) : WB_FAC_MAX;
+      if (fac > WB_FAC_MAX) fac = WB_FAC_MAX;
+      if (fac < WB_FAC_MIN) fac = WB_FAC_MIN;
+      if (rejected_last && fac > 1.) fac = 1.;
+      if (!(shortstep && fac >= 1.)) h = hh * fac;
+      rejected_last = 0;
+    }
+    if (h < 1e-12 * interval || ++nsteps > WB_MAX_STEPS) return 3;
+    if (h > interval) h = interval;
+  }
+  *hp = h;
+  return 0;
+}
+"""
