@@ -39,7 +39,7 @@ from workbench.identify.arx import fit_arx
 from workbench.identify.arx import validate as arx_validate
 from workbench.identify.excitation import aprbs, as_reference
 from workbench.identify.grey_box import estimate
-from workbench.params import atomic_write_text
+from workbench.params import atomic_write_text, json_safe
 from workbench.recording import Recording
 
 HERE = Path(__file__).resolve().parent
@@ -692,8 +692,8 @@ def _finish(out, results, cal, ex, sweeps, meas, done, t_start, quick) -> int:
                    for k, v in sweeps.items()},
         "run_time_s": time.perf_counter() - t_start,
     }
-    atomic_write_text(out / "summary.json",
-                      json.dumps(summary, indent=1, default=rp.json_default) + "\n")
+    plain = json_safe(json.loads(json.dumps(summary, default=rp.json_default)))
+    atomic_write_text(out / "summary.json", json.dumps(plain, indent=1, allow_nan=False) + "\n")
     print(f"paper 000: {n_ok} of {len(results)} paper results agree")
     print(f"  report: {html}\n          {pdf}")
     return 0
