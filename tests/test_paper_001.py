@@ -105,7 +105,7 @@ def test_pid_designed_and_validated_on_both(run):
 
 
 def test_plant_file_marks_assumptions():
-    text = (ROOT / "designs" / "plants" / "iliev_lines_1m.toml").read_text()
+    text = (ROOT / "designs" / "plants" / "papers" / "iliev_lines_1m.toml").read_text()
     data = tomllib.loads(text)
     assert data["lines"]["length"] == 1.0
     for key in ("bore =", "mass =", "diameter =", "sonic_conductance =", "pressure = 7"):
