@@ -106,6 +106,20 @@ def test_arx_reidentified_from_the_csv_independently(run):
     assert np.allclose(np.sort_complex(poles), np.sort_complex(ours), atol=1e-3)
 
 
+def test_cli_identifies_the_same_model_from_the_csv(run, capsys):
+    """The report says: the same as ``workbench identify arx table1_experiment.csv
+    --input r --output x --orders 4 1 2``. The CLI reads the CSV (x with 7 decimals,
+    0.1 um), so its coefficients match to about 1e-4 relative."""
+    from workbench.cli import main
+    out, s = run
+    assert main(["identify", "arx", str(out / "table1_experiment.csv"), "--input", "r",
+                 "--output", "x", "--orders", "4", "1", "2", "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    assert np.allclose(cli["a"], s["arx"]["a"], rtol=1e-3, atol=1e-4)
+    assert cli["b"][0] == pytest.approx(s["arx"]["b"][0], rel=1e-2)
+    assert cli["fit_validation"] == pytest.approx(s["arx"]["validation_fit"], abs=0.5)
+
+
 def test_headline_numbers_against_the_paper(run):
     rows = _rows(run[1])
     # 1 V step: the paper gives one digit (0.7 +- 0.05); the rig model's velocity creeps
