@@ -329,7 +329,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                          "controller (K0 = 7). Its dominant poles are faster than those of the PCT "
                          "and ZOH models: the rig responds about twice as fast as the linear model "
                          "predicts. Paper 000 blames static friction, supply pressure variation, "
-                         "valve deadband and leakage, none of which the linear model has."),
+                         "valve deadband and leakage, none of which the linear model has. "
+                         "designs/paper_000.py calibrates the rig model from the paper's "
+                         "measurements and re-identifies Table I on it."),
             rp.Table(["model", "closed-loop poles", "|z|max", "DC gain"], rows, units=["", "", "-", "-"],
                      caption="Closed-loop poles at T = 10 ms"),
             rp.Figure(fig, "Closed-loop poles in the z-plane and unit-step responses of the ARX, "

@@ -1,0 +1,193 @@
+"""designs/paper_000.py --quick: the paper's numbers beside the workbench's (issue 13).
+
+The script runs once per module (about 12 s). Paper values below are typed in from
+the paper (Table I, Table II, Sec. III) independently of the script's constants.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from conftest import run_design
+
+#: Table I (magnitudes and std from the paper; signs restored as in physics.md).
+TABLE1_A = [-2.4478, 2.1352, -0.7742, 0.0995]
+TABLE1_B1 = 0.0125
+KV = 0.7            # m/(V s), Sec. III eq. (5), Fig. 6
+W0, ZETA = 32.97, 1.1
+CONTRACT = {"result", "paper", "workbench", "unit", "source", "agrees"}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("paper_000")
+    rc, summary = run_design("paper_000", out)
+    assert rc == 0 and summary is not None
+    return out, summary
+
+
+def _rows(summary) -> dict:
+    return {r["result"]: r for r in summary["paper_results"]}
+
+
+def test_summary_contract(run):
+    _, s = run
+    rows = s["paper_results"]
+    assert len(rows) >= 10
+    for r in rows:
+        assert CONTRACT <= set(r), r
+        assert isinstance(r["agrees"], bool)
+        assert isinstance(r["result"], str) and r["result"]
+        assert isinstance(r["source"], str) and r["source"]
+        assert isinstance(r["workbench"], (int, float, str))
+    # derived values are marked as such, quoted ones name a place in the paper
+    for r in rows:
+        assert ("derived" in r["source"]) or re.search(r"Table|Sec\.|Fig\.|eq\.", r["source"]), r
+
+
+def test_table1_values_are_the_papers(run):
+    rows = _rows(run[1])
+    for i, a in enumerate(TABLE1_A):
+        row = next(v for k, v in rows.items() if k.startswith(f"Table I ARX [4 1 1] a{i + 1}"))
+        assert row["paper"] == a
+    row = next(v for k, v in rows.items() if k.startswith("Table I ARX [4 1 1] b1"))
+    assert row["paper"] == TABLE1_B1
+
+
+def _read_csv(path):
+    meta, lines = {}, path.read_text().splitlines()
+    body = []
+    for ln in lines:
+        if ln.startswith("#"):
+            k, _, v = ln[1:].partition(":")
+            meta[k.strip()] = v.strip()
+        else:
+            body.append(ln)
+    cols = body[0].split(",")
+    data = np.array([[float(c) for c in ln.split(",")] for ln in body[1:]])
+    return meta, cols, data
+
+
+def test_experiment_csv_columns_and_sampling(run):
+    out, _ = run
+    meta, cols, d = _read_csv(out / "table1_experiment.csv")
+    assert cols == ["t", "r", "u", "x"]
+    assert float(meta["sample_time"]) == 0.01
+    assert d.shape == (800, 4)                          # Sec. II: 400 + 400 samples
+    # the paper's sampling, 10 ms (4 decimals written, so 1e-9 is exact rounding)
+    assert np.allclose(np.diff(d[:, 0]), 0.01, atol=1e-9)
+    r, u, x = d[:, 1], d[:, 2], d[:, 3]
+    assert r.min() >= 0.0 and r.max() <= 0.5          # the stroke
+    assert u.min() >= 0.0 and u.max() <= 10.0          # the 0..10 V command (Sec. II)
+    assert np.all((x >= -1e-9) & (x <= 0.5 + 1e-9))
+    # an APRBS: many distinct levels, each held for at least 10 samples
+    edges = np.flatnonzero(np.diff(r)) + 1
+    assert len(edges) >= 10 and np.min(np.diff(edges)) >= 10
+
+
+def test_arx_reidentified_from_the_csv_independently(run):
+    """ARX [4 1 1] = (4, 1, 2) by numpy least squares on the CSV's first half must equal
+    the script's coefficients (same data, same estimator form: differences ~1e-10 from
+    the CSV's 7 written digits of x, relative 1e-5 allowed)."""
+    out, s = run
+    _, _, d = _read_csv(out / "table1_experiment.csv")
+    r, x = d[:400, 1], d[:400, 3]
+    k = np.arange(4, 400)
+    phi = np.column_stack([-x[k - 1], -x[k - 2], -x[k - 3], -x[k - 4], r[k - 2]])
+    theta = np.linalg.lstsq(phi, x[k], rcond=None)[0]
+    assert np.allclose(theta[:4], s["arx"]["a"], rtol=1e-4, atol=1e-5)
+    assert theta[4] == pytest.approx(s["arx"]["b"][0], rel=1e-3)
+    poles = np.roots(np.r_[1.0, theta[:4]])
+    ours = np.array([complex(*p) for p in s["arx"]["poles"]])
+    assert np.allclose(np.sort_complex(poles), np.sort_complex(ours), atol=1e-3)
+
+
+def test_cli_identifies_the_same_model_from_the_csv(run, capsys):
+    """The report says: the same as ``workbench identify arx table1_experiment.csv
+    --input r --output x --orders 4 1 2``. The CLI reads the CSV (x with 7 decimals,
+    0.1 um), so its coefficients match to about 1e-4 relative."""
+    from workbench.cli import main
+    out, s = run
+    assert main(["identify", "arx", str(out / "table1_experiment.csv"), "--input", "r",
+                 "--output", "x", "--orders", "4", "1", "2", "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    assert np.allclose(cli["a"], s["arx"]["a"], rtol=1e-3, atol=1e-4)
+    assert cli["b"][0] == pytest.approx(s["arx"]["b"][0], rel=1e-2)
+    assert cli["fit_validation"] == pytest.approx(s["arx"]["validation_fit"], abs=0.5)
+
+
+def test_headline_numbers_against_the_paper(run):
+    rows = _rows(run[1])
+    # 1 V step: the paper gives one digit (0.7 +- 0.05); the rig model's velocity creeps
+    # up after the step (report: it does not level off), which costs about 0.07 m/s on
+    # the averaging window: 0.12 covers both
+    kv = rows["velocity after a 1 V valve step (Kv x 1 V)"]["workbench"]
+    assert kv == pytest.approx(KV, abs=0.12)
+    # the supply is Table II's 5e5 Pa read as absolute or as gauge, nothing else
+    p_s = rows["supply pressure"]["workbench"]
+    assert p_s in (pytest.approx(5e5), pytest.approx(5e5 + 101325.0))
+    # w0, zeta: Table II's formula values, 10 % (the rig rests below supply pressure)
+    assert rows["natural frequency w0"]["workbench"] == pytest.approx(W0, rel=0.10)
+    assert rows["damping ratio zeta"]["workbench"] == pytest.approx(ZETA, rel=0.10)
+    # DC gain of the closed loop: Table I's B(1)/A(1) = 0.984; two digits
+    dc_paper = TABLE1_B1 / (1 + sum(TABLE1_A))
+    assert rows["closed-loop DC gain"]["paper"] == pytest.approx(dc_paper, abs=5e-4)
+    assert rows["closed-loop DC gain"]["workbench"] == pytest.approx(dc_paper, abs=0.02)
+
+
+def test_agreement_flags_follow_the_stated_tolerances(run):
+    rows = _rows(run[1])
+    kv = rows["velocity after a 1 V valve step (Kv x 1 V)"]
+    assert kv["agrees"] == (abs(kv["workbench"] - KV) <= 0.05)
+    for name, ref in (("natural frequency w0", W0), ("damping ratio zeta", ZETA)):
+        assert rows[name]["agrees"] == (abs(rows[name]["workbench"] / ref - 1) <= 0.10)
+    for i, a in enumerate(TABLE1_A):
+        row = next(v for k, v in rows.items() if k.startswith(f"Table I ARX [4 1 1] a{i + 1}"))
+        tol = float(re.search(r"2 combined std = ([0-9.e+-]+)", row["how"]).group(1))
+        assert row["agrees"] == (abs(row["workbench"] - a) <= tol * (1 + 1e-3))
+
+
+def test_deadband_and_fig7(run):
+    """The deadband comes from Table I's DC gain: the re-identified loop must then have
+    it (0.984 within its rounding band, 2 std = 0.01), its interval must contain it,
+    and the P loop shows Fig. 7's 'large' error (> 4 mm) with it and not without it
+    (the report's measured cause)."""
+    _, s = run
+    cal = s["calibration"]
+    lo, hi = cal["deadband_ci95"]
+    assert 0 < lo < cal["deadband"] < hi < 0.2
+    dc = _rows(s)["closed-loop DC gain"]["workbench"]
+    assert dc == pytest.approx(TABLE1_B1 / (1 + sum(TABLE1_A)), abs=0.01)
+    assert np.mean(s["steady_state_errors"]) > 4e-3
+    without = s["sweeps"]["deadband"][0]
+    assert without["change"]["valve.deadband"] == 0.0 and without["sse"] < 1e-3
+    # Fig. 6 is held while the deadband varies: the 1 V step velocity is unchanged
+    # (same flow area at 1 V; 1e-3 m/s covers the integration tolerance)
+    assert without["v_step"] == pytest.approx(s["step_velocity_1v"], abs=1e-3)
+
+
+def test_valve_size_cannot_reach_table1(run):
+    """The measured cause of the Table I disagreement: doubling the valve moves the
+    1 V step far from Fig. 6's 0.7 m/s while the dominant pole stays slower than
+    Table I's |z| = 0.868."""
+    _, s = run
+    valve = s["sweeps"]["valve"]
+    assert valve[-1]["v_step"] > valve[0]["v_step"] + 0.2
+    table1 = float(np.max(np.abs(np.roots(np.r_[1.0, TABLE1_A]))))     # 0.868
+    assert all(np.hypot(*v["pole"]) > table1 + 0.03 for v in valve)
+
+
+def test_report_first_table_is_the_papers(run):
+    out, _ = run
+    html = (out / "report.html").read_text()
+    first = html[html.index("<table"):html.index("</table>")]
+    for head in ("paper", "workbench", "how obtained", "agrees?"):
+        assert head in first
+    assert (out / "report.pdf").stat().st_size > 10_000
+    cal = (out / "situm_rodless.calibrated.toml").read_text()
+    assert "sonic_conductance" in cal
+    assert json.loads((out / "summary.json").read_text())["quick"] is True
