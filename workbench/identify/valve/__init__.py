@@ -39,7 +39,8 @@ Examples
 Modules: :mod:`.table` (the table format), :mod:`.generator` (tables from a plant's
 valve), :mod:`.polynomial` (approximation I), :mod:`.affine` (approximation II),
 :mod:`.quality` (R and errors), :mod:`.gain` (pressure gain characteristic),
-:mod:`.tank` (tank step tests), :mod:`.report` (all at once, figures).
+:mod:`.tank` (tank step tests), :mod:`.report` (all at once, figures),
+:mod:`.flow_stage` (a 3/2 flow stage like paper 003's, the known law of ``designs/paper_003.py``).
 
 Command line (:mod:`workbench.cli.identify`): ``workbench identify valve TABLE.csv
 --approx both --out DIR`` and ``workbench identify valve-table PLANT.toml --out
@@ -49,6 +50,7 @@ TABLE.csv`` (the generator).
 from __future__ import annotations
 
 from .affine import PRESSURE_SCALE, AffineTableFit, fit_affine
+from .flow_stage import FlowStage, chebyshev_pressures
 from .gain import (PressureGain, TableLaw, compare_pressure_gain, pressure_gain,
                    pressure_gain_from_data)
 from .generator import centre_dense_commands, generate_valve_table, valve_flow_law
@@ -63,6 +65,7 @@ __all__ = [
     "COLUMNS", "MIN_POINTS", "G_PER_KG", "PRESSURE_SCALE",
     "ValveTable", "load_valve_table",
     "valve_flow_law", "centre_dense_commands", "generate_valve_table",
+    "FlowStage", "chebyshev_pressures",
     "FitQuality", "PolynomialValveFit", "fit_polynomial", "DegreeSelection", "select_degrees",
     "AffineTableFit", "fit_affine", "TableLaw",
     "PressureGain", "pressure_gain", "pressure_gain_from_data", "compare_pressure_gain",
