@@ -35,7 +35,6 @@ import numpy as np
 from workbench import Plant, simulate, validate
 from workbench import report as rp
 from workbench.controllers import pd
-from workbench.identify import plots
 from workbench.identify.excitation import prbs
 from workbench.identify.rls import choose_forgetting, rls
 from workbench.params import atomic_write_text
