@@ -188,7 +188,7 @@ def centre_column_slope(table, p_e: float) -> float:
     return -float(c[1])
 
 
-def paper_rows(stage, table, fits, tank, gains_cmp) -> list[dict]:
+def paper_rows(stage, table, fits, tank, gains_cmp, full_cmp) -> list[dict]:
     """The first table: one entry per paper result."""
     i, ii15, ii = fits["I (n=5, m=10)"], fits["II, 15 coef. (one psi)"], fits["II, two psi, phi fitted"]
     iic = fits["II, two psi, phi from centre"]
@@ -236,9 +236,18 @@ def paper_rows(stage, table, fits, tank, gains_cmp) -> list[dict]:
                  "source": "sect. 5, Fig. 9: 'the errors are smaller for u > 0'",
                  "how": "largest error of the upward against the downward steps",
                  "agrees": bool(up < down)})
+    c1, c2 = full_cmp["I (n=5, m=10)"], full_cmp["II, two psi, phi fitted"]
+    e1 = 0.5 * (c1["median_rel_cp"] + c1["median_rel_gu"])
+    e2 = 0.5 * (c2["median_rel_cp"] + c2["median_rel_gu"])
+    rows.append({"result": "Cp, Gu along p_e(u): II closer to the true valve than I",
+                 "paper": "yes ('seems to be better')", "workbench": "yes" if e2 < e1 else "no",
+                 "unit": "-", "source": "sect. 5, Fig. 8: 'the control approximation seems to be "
+                                        "better'",
+                 "how": f"median relative error of Cp and Gu over {c1['commands']} commands: "
+                        f"II {100 * e2:.0f} %, I {100 * e1:.0f} %", "agrees": bool(e2 < e1)})
     g5 = gains_cmp.get("I (n=m=5)")
     if g5 is not None:
-        g10, g2 = gains_cmp["I (n=5, m=10)"], gains_cmp["II, two psi, phi from centre"]
+        g10, g2 = gains_cmp["I (n=5, m=10)"], gains_cmp["II, two psi, phi fitted"]
         rows.append({"result": "pressure gain: I (5, 10) better than I (5, 5)", "paper": "yes",
                      "workbench": "yes" if g10 < g5 else "no", "unit": "-",
                      "source": "sect. 4.2, Fig. 4a: better for degrees greater than five",
@@ -278,8 +287,9 @@ def _body(args, out: Path, done: list) -> int:
         lo, hi = table.pressure_range
         fine = np.linspace(-2.0, 2.0, 81 if args.quick else 401)
         gains = {lab: vf.pressure_gain(f, fine, (lo, hi), label=lab) for lab, f in laws.items()}
-        gains_cmp = {lab: vf.compare_pressure_gain(gains["true valve"], g, (lo, hi))
-                     ["max_abs_dp_e_Pa"] for lab, g in gains.items() if lab != "true valve"}
+        full_cmp = {lab: vf.compare_pressure_gain(gains["true valve"], g, (lo, hi))
+                    for lab, g in gains.items() if lab != "true valve"}
+        gains_cmp = {lab: c["max_abs_dp_e_Pa"] for lab, c in full_cmp.items()}
         done.append(_gain_section(gains, gains_cmp))
     with rp.step("tank steps and tangent models"):
         tank = vf.tank_steps(laws, "true valve", volume=PAPER["volume"][0], u_e=0.0, steps=STEPS,
@@ -291,7 +301,7 @@ def _body(args, out: Path, done: list) -> int:
         done.append(_tank_section(tank, budget, clean))
         done.append(_tangent_section(trows, reasons))
     with rp.step("write report"):
-        rows = paper_rows(stage, table, fits, tank, gains_cmp)
+        rows = paper_rows(stage, table, fits, tank, gains_cmp, full_cmp)
         n_ok = sum(r["agrees"] for r in rows)
         first = rp.Section("Paper 003 results beside the workbench's", [
             rp.Table(["result", "paper", "workbench", "unit", "how obtained", "source", "agrees?"],
