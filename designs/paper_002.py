@@ -183,7 +183,7 @@ def _body(args, out: Path, done: list) -> int:
         done.append(_sweep_section(sweep))
     with rp.step("robustness with the paper's bounds"):
         nominal, rob = robustness(plant, args.quick)
-        done.append(_robust_section(rob, nominal))
+        done.append(_robust_section(rob, nominal, plant))
     with rp.step("write report"):
         rows = paper_rows(choice, res, rob)
         n_ok = sum(r["agrees"] for r in rows)
@@ -321,14 +321,26 @@ def _sweep_section(sweep):
     ])
 
 
-def _robust_section(rob, nominal):
+def flow_factors(rob, plant: Plant) -> tuple[np.ndarray, np.ndarray]:
+    """Paper 002's bound parameter of each draw, g = C kappa / (C0 kappa0), and pass flags."""
+    c0, k0 = plant.params["valve.sonic_conductance"], plant.params["gas.polytropic_index"]
+    g = np.array([d["valve.sonic_conductance"] * d["gas.polytropic_index"] / (c0 * k0)
+                  for d in rob.draws])
+    return g, np.array(rob.passed["PD (plant file)"], dtype=bool)
+
+
+def _robust_section(rob, nominal, plant):
     lo, hi = rob.pass_interval("PD (plant file)")
+    g, ok = flow_factors(rob, plant)
+    edge = (f"passes down to g = {g[ok].min():.3f}; fails from g = {g[~ok].max():.3f} down"
+            if ok.any() and (~ok).any() else "passes everywhere" if ok.all() else "fails everywhere")
     return rp.Section("Paper 002's bounds in a robustness analysis", [
         rp.KeyValues([("controller", "the rig's PD loop (plant file: kp = 5 V/m, kd = 0.1 V s/m)"),
                       ("draws", f"{len(rob.draws)} plants, polytropic index uniform in 1 ... 1.3997, "
                                 "flow factor uniform in 0.075 ... 1.3297 (paper 002, sect. II)"),
                       ("nominal plant", "passes" if nominal.passed else
                        "fails: " + ", ".join(nominal.failed)),
+                      ("by bound parameter g", edge),
                       ("pass rate", f"{100 * rob.pass_rate('PD (plant file)'):.0f} % "
                                     f"(95 % interval {100 * lo:.0f} ... {100 * hi:.0f} %)")]),
         rp.Paragraph("At the low end of the bound parameter the valve passes a thirteenth of its "
