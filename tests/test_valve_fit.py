@@ -803,3 +803,25 @@ def test_catalog_curve_gives_the_iso_6358_characteristic(tmp_path, capsys):
     path.write_text("u,q_n\n5,0\n7,300\n10,1500\n")
     with pytest.raises(InputError, match="no data for psi_out"):
         vf.fit_affine(vf.catalog_table(vf.load_catalog_curve(path), B, P_S))
+
+
+def test_flow_stage_calibration_and_refusals():
+    """FlowStage.calibrated puts the centred port at rest at the given pressure: checked
+    with the ISO 6358 law written out here (q_reference's formula, no shared code)."""
+    st = vf.FlowStage.calibrated(5.1e5)
+    b, d = st.critical_pressure_ratio, st.underlap
+
+    def q(p):                                    # centred spool: both restrictions d/2 open
+        def iso(c, p1, p2):
+            x = p2 / p1
+            return c * p1 * 1.185 * (1.0 if x <= b else math.sqrt(1 - ((x - b) / (1 - b)) ** 2))
+        return 0.5 * d * (iso(st.inlet_conductance, st.supply_pressure, p)
+                          - iso(st.exhaust_conductance, p, st.atmospheric_pressure))
+    assert optimize.brentq(q, 2e5, 6.9e5, xtol=1e-6) == pytest.approx(5.1e5, abs=1e-3)
+    assert st.flow(5.1e5, 0.0) == pytest.approx(0.0, abs=1e-15)
+    for kw, where in (({"underlap": 1.5}, "underlap"), ({"critical_pressure_ratio": 1.0}, "0 < b < 1"),
+                      ({"supply_pressure": 5e4}, "supply")):
+        with pytest.raises(InputError, match=where):
+            vf.FlowStage(**kw)
+    with pytest.raises(InputError, match="between atmosphere"):
+        vf.FlowStage.calibrated(8e5)

@@ -46,7 +46,13 @@ coefficient counts), :mod:`.plausibility` (flow limits before a fit is written t
 
 Command line (:mod:`workbench.cli.identify`): ``workbench identify valve TABLE.csv
 --approx both --out DIR`` and ``workbench identify valve-table PLANT.toml --out
-TABLE.csv`` (the generator).
+TABLE.csv`` (the generator). ``--approximation II --coefficients 15`` picks paper 003's
+structure by its coefficient count (:mod:`.counts`), ``--phi-from centre`` holds phi at the
+centred column, ``--catalog --critical-ratio B --supply-pressure P`` fits a datasheet
+nominal-flow curve (:mod:`.catalog`), and ``--plant-toml`` is refused when the fitted
+law's flows exceed the ISO 6358 choked flow of the base plant's conductance
+(:mod:`.plausibility`). Fits refuse what the data cannot determine (a polynomial degree
+beyond the distinct pressures, a flow direction without data).
 """
 
 from __future__ import annotations
