@@ -728,12 +728,20 @@ def test_phi_from_the_centre_column_is_its_least_squares_polynomial(table):
     (["--coefficients", "15"], "add --approx I or --approx II"),
     (["--approx", "I", "--coefficients", "7"], "7 coefficients cannot be written"),
     (["--approx", "II", "--coefficients", "3"], "no approximation II structure has 3"),
+    (["--approx", "II", "--coefficients", "15", "--affine-degrees", "5", "5", "2"],
+     "do not give 15 coefficients"),
     (["--tank-volume", "0"], "expected a tank volume > 0"),
     (["--critical-ratio", "0.3"], "belong to --catalog"),
 ])
 def test_cli_valve_refusals(argv, message, capsys):
     assert main(["identify", "valve", str(TABLE), "--no-tank"] + argv) == 2
     assert message in capsys.readouterr().err
+
+
+def test_cli_valve_table_refuses_a_negative_leakage(tmp_path, capsys):
+    out = tmp_path / "t.csv"
+    assert main(["identify", "valve-table", str(PLANT), "--out", str(out), "--leakage", "-1"]) == 2
+    assert "leakage" in capsys.readouterr().err and not out.exists()
 
 
 def test_paper_coefficient_counts_select_the_papers_structures(capsys):

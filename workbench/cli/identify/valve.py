@@ -55,7 +55,7 @@ def add_valve(subparsers) -> None:
     v.add_argument("--select", action="store_true",
                    help="choose approximation I degrees by 5-fold cross validation "
                         "(n 1..7, m 1..12)")
-    v.add_argument("--affine-degrees", nargs=3, type=int, default=[5, 5, 2],
+    v.add_argument("--affine-degrees", nargs=3, type=int, default=None,
                    metavar=("PHI", "PSI", "GAMMA"),
                    help="approximation II: degree of phi (-1: phi = 0), of psi_in/psi_out, "
                         "and number of odd Gamma terms (default 5 5 2, paper 003)")
@@ -153,7 +153,17 @@ def _check_valve_args(args: argparse.Namespace) -> None:
             args.degrees = args.degrees or list(n_m)
         else:
             phi, psi, gam, shared = affine_structure(args.coefficients)
-            args.affine_degrees, args.shared_psi = [phi, psi, gam], shared
+            if args.affine_degrees is not None and affine_count(
+                    None if args.affine_degrees[0] < 0 else args.affine_degrees[0],
+                    args.affine_degrees[1], args.affine_degrees[2],
+                    args.shared_psi) != args.coefficients:
+                raise InputError(f"--affine-degrees {' '.join(map(str, args.affine_degrees))} "
+                                 f"do not give {args.coefficients} coefficients",
+                                 location="--coefficients")
+            if args.affine_degrees is None:
+                args.affine_degrees, args.shared_psi = [phi, psi, gam], shared
+    if args.affine_degrees is None:
+        args.affine_degrees = [5, 5, 2]
     if args.catalog and (args.critical_ratio is None or args.supply_pressure is None):
         raise InputError("--catalog needs --critical-ratio B (the datasheet's b) and "
                          "--supply-pressure PA (absolute)", location="--catalog")
