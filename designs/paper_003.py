@@ -359,6 +359,16 @@ def _fit_section(table, fits):
         rp.Table(["approximation", "coefficients (paper count)", "free", "R", "max error",
                   "RMS error"], rows, units=["", "-", "-", "-", "g/s", "g/s"],
                  caption="Accuracy on the measured table (paper: R = 0.99; I < 0.4 g/s, II < 0.5 g/s)"),
+        rp.Paragraph("Reading paper 003's 15: its count (n+1) + (m+1) + (l+1) has one psi "
+                     "polynomial, while its text and Fig. 5b give psi two branches, one for the "
+                     "inlet (Gamma > 0) and one for the exhaust (Gamma < 0). Either the paper "
+                     "counts the two-branch law once (it then has 21 coefficients by the same "
+                     "count: row 'II, two psi'), or one psi serves both directions (15 "
+                     "coefficients: row 'II, 15 coef.'). The table measures both: one psi "
+                     f"reaches R = {fits['II, 15 coef. (one psi)'].quality.r:.3f} only, since "
+                     "the inlet law vanishes at supply and the exhaust law at atmosphere; the "
+                     "two-branch law meets the paper's R and error bound. The workbench takes "
+                     "the first reading as the paper's approximation II."),
         rp.Figure(plots.valve_error_figure(table.u, table.p, errors),
                   "Flow errors over the table (paper Figs. 4b and 6b)"),
     ])
