@@ -157,6 +157,13 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="shorter sweep and robustness run")
     ap.add_argument("--out", default=str(ROOT / "reports" / "paper_002"), help="output folder")
     args = ap.parse_args(argv)
+    from workbench.errors import InputError
+    from workbench.output import check_output_dir
+    try:
+        check_output_dir(args.out)                 # refused before any work
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     return rp.run_design(TITLE, args.out, PLANT, lambda done: _body(args, Path(args.out), done))
 
 

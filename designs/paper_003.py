@@ -270,6 +270,13 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer fits and tank samples")
     ap.add_argument("--out", default=str(ROOT / "reports" / "paper_003"), help="output folder")
     args = ap.parse_args(argv)
+    from workbench.errors import InputError
+    from workbench.output import check_output_dir
+    try:
+        check_output_dir(args.out)                 # refused before any work
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     return rp.run_design(TITLE, args.out, None, lambda done: _body(args, Path(args.out), done))
 
 
