@@ -698,6 +698,14 @@ def test_fit_refuses_what_two_pressures_cannot_determine(tmp_path, capsys):
     assert "distinct pressures" in capsys.readouterr().err
 
 
+def test_fit_refuses_a_table_without_flow_variation():
+    flat = vf.ValveTable.from_arrays(np.repeat([4.0, 5.0, 6.0], 3), np.tile([1e5, 3e5, 6e5], 3),
+                                     np.zeros(9))
+    for fit in (vf.fit_polynomial, vf.fit_affine):
+        with pytest.raises(InputError, match="no characteristic to fit"):
+            fit(flat, 1, 1) if fit is vf.fit_polynomial else fit(flat, 1, 1, 1)
+
+
 def test_fit_refuses_a_flow_direction_without_data():
     table = vf.load_valve_table(TABLE)
     half = vf.ValveTable(u=table.u[table.u >= CENTER], p=table.p[table.u >= CENTER],
@@ -808,6 +816,9 @@ def test_catalog_curve_gives_the_iso_6358_characteristic(tmp_path, capsys):
     assert "--catalog needs --critical-ratio" in capsys.readouterr().err
     with pytest.raises(InputError, match="0 < b < 1"):
         vf.catalog_table(curve, 1.5, P_S)
+    path.write_text("u,q_n\n0,-1000\n4,200\n5,0\n10,1500\n")
+    with pytest.raises(InputError, match="wrong sign"):
+        vf.catalog_table(vf.load_catalog_curve(path), B, P_S)
     path.write_text("u,q_n\n5,0\n7,300\n10,1500\n")
     with pytest.raises(InputError, match="no data for psi_out"):
         vf.fit_affine(vf.catalog_table(vf.load_catalog_curve(path), B, P_S))

@@ -156,6 +156,16 @@ def catalog_table(curve: CatalogCurve, b: float, supply_pressure: float,
                          f"{supply_pressure!r}", location="--supply-pressure")
     ps = (np.linspace(atmospheric_pressure, supply_pressure, 15) if p_values is None
           else np.asarray(p_values, dtype=float))
+    centre = float(curve.u[np.argmin(np.abs(curve.q_n))])
+    if not np.any(curve.q_n != 0):
+        raise InputError("every nominal flow of the curve is 0: nothing to fit", source=curve.source)
+    wrong = ((curve.u < centre) & (curve.q_n > 0)) | ((curve.u > centre) & (curve.q_n < 0))
+    if np.any(wrong):
+        k = int(np.flatnonzero(wrong)[0])
+        raise InputError(f"the nominal flow at u = {curve.u[k]:g} V has the wrong sign for its "
+                         f"side of the centre ({centre:g} V, the command of the smallest flow): "
+                         "q_n must be < 0 (to the exhaust) below it and > 0 (from the supply) "
+                         "above it", source=curve.source, location="column 'q_n'")
     c = curve.conductance(b)
     uu, pp = (a.ravel() for a in np.meshgrid(curve.u, ps, indexing="ij"))
     cc = np.repeat(c, len(ps))
@@ -163,7 +173,6 @@ def catalog_table(curve: CatalogCurve, b: float, supply_pressure: float,
     q_in = np.asarray(gas.iso6358_flow(cc, b, supply_pressure, pp, temperature, temperature))
     q_out = np.asarray(gas.iso6358_flow(cc, b, pp, atmospheric_pressure, temperature, temperature))
     q = np.where(sgn > 0, q_in, np.where(sgn < 0, -q_out, 0.0))
-    centre = float(curve.u[np.argmin(np.abs(curve.q_n))])
     meta = {"generator": "workbench.identify.valve.catalog_table: ISO 6358 law from a catalog "
                          f"nominal-flow curve ({curve.source}), b = {b!r}",
             "supply_pressure": float(supply_pressure),
