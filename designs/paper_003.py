@@ -452,8 +452,9 @@ def _downward_text(budget, clean: dict) -> str:
                 f"in the transient at {b['worst_t_s']:.1f} s and {b['worst_p_true_Pa'] / 1e5:.2f} "
                 f"bar, where the true flow is {b['flow_at_worst_g_s']:.3f} g/s and the fit's is "
                 f"off by {b['flow_error_at_worst_g_s']:.3f} g/s: the polynomial's error near the "
-                "border of the table (paper 003's 'border effect') acting on a small flow, "
-                "divided by a "
+                "border of the table (paper 003's 'border effect': the exhaust flow goes as "
+                "sqrt(1 - ((p_atm/p - b)/(1 - b))^2), with an infinite slope as p -> p_atm, which "
+                "no polynomial in p follows) acting on a small flow, divided by a "
                 f"small pressure (fitted to the same grid without noise: {clean[b['du_V']]:.2f} %, "
                 + ("a model error)." if clean[b["du_V"]] > 2 else "so the noise causes it)."))
     return " ".join(parts) or "Approximation I stays within 2 % on every step."
