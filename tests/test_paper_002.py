@@ -73,6 +73,7 @@ def test_paper_claims_on_lambda(run):
     for n in ("a1", "a2", "b1", "b2"):
         assert r90["estimate_spread"][n] > 2.0 * r99["estimate_spread"][n]
     assert r99["fit_one_step_percent"] > 90.0
+    assert r99["fit_horizon_percent"] > r90["fit_horizon_percent"]      # 0.1 s ahead
     assert run[1]["automatic"]["forgetting"] in (0.9, 0.95, 0.98, 0.99, 0.995, 1.0)
 
 
