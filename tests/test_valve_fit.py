@@ -681,3 +681,166 @@ def test_valve_json_degree_selection_values(capsys):
     ok = [((n + 1) * (m + 1), cv[n - 1, m - 1], n, m) for n in d["n_values"]
           for m in d["m_values"] if cv[n - 1, m - 1] <= best * 1.02]
     assert (d["n"], d["m"]) == min(ok)[2:]
+
+
+# ====================================================================== issue 15: refusals, catalog
+def test_fit_refuses_what_two_pressures_cannot_determine(tmp_path, capsys):
+    """Approximation II (phi and psi of degree 5) on a 2-pressure table was accepted and
+    gave 60.8 kg/s at 1 bar; a degree-n polynomial needs n + 1 distinct pressures."""
+    two = vf.generate_valve_table(PLANT, p_values=[P_ATM, P_S])
+    with pytest.raises(InputError, match="needs at least 6 distinct pressures; the table has 2"):
+        vf.fit_affine(two)
+    fit = vf.fit_affine(two, 1, 1, 2)          # straight lines through 2 pressures: determined
+    assert fit.quality.points == len(two)
+    path = tmp_path / "two.csv"
+    two.to_csv(path)
+    assert main(["identify", "valve", str(path), "--approx", "II", "--no-tank"]) == 2
+    assert "distinct pressures" in capsys.readouterr().err
+
+
+def test_fit_refuses_a_table_without_flow_variation():
+    flat = vf.ValveTable.from_arrays(np.repeat([4.0, 5.0, 6.0], 3), np.tile([1e5, 3e5, 6e5], 3),
+                                     np.zeros(9))
+    for fit in (vf.fit_polynomial, vf.fit_affine):
+        with pytest.raises(InputError, match="no characteristic to fit"):
+            fit(flat, 1, 1) if fit is vf.fit_polynomial else fit(flat, 1, 1, 1)
+
+
+def test_fit_refuses_a_flow_direction_without_data():
+    table = vf.load_valve_table(TABLE)
+    half = vf.ValveTable(u=table.u[table.u >= CENTER], p=table.p[table.u >= CENTER],
+                         q_m=table.q_m[table.u >= CENTER], metadata=table.metadata)
+    with pytest.raises(InputError, match="no data for psi_out"):
+        vf.fit_affine(half)
+    assert vf.fit_affine(half, shared_psi=True).quality.points == len(half)
+
+
+def test_phi_from_the_centre_column_is_its_least_squares_polynomial(table):
+    """q(p, centre) = phi(p) when Gamma(0) = 0: phi is the degree-5 least-squares fit of
+    the centred column (numpy.polyfit here; agreement to 1e-12 kg/s, rounding)."""
+    fit = vf.fit_affine(table, phi_from="centre")
+    sel = table.u == CENTER
+    c = np.polyfit(table.p[sel] / 1e5, table.q_m[sel], 5)
+    ps = np.linspace(P_ATM, P_S, 7)
+    assert fit.flow(ps, np.full(7, CENTER)) == pytest.approx(np.polyval(c, ps / 1e5), abs=1e-12)
+    off = vf.ValveTable(u=table.u[table.u != CENTER], p=table.p[table.u != CENTER],
+                        q_m=table.q_m[table.u != CENTER], metadata=table.metadata)
+    with pytest.raises(InputError, match="centred command"):
+        vf.fit_affine(off, phi_from="centre")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--leakage", "-1", "--reference-plant", str(PLANT)], "expected an underlap leakage in [0, 1)"),
+    (["--leakage", "nan", "--reference-plant", str(PLANT)], "expected an underlap leakage"),
+    (["--leakage", "0.05"], "--leakage describes --reference-plant's valve"),
+    (["--coefficients", "15"], "add --approx I or --approx II"),
+    (["--approx", "I", "--coefficients", "7"], "7 coefficients cannot be written"),
+    (["--approx", "II", "--coefficients", "3"], "no approximation II structure has 3"),
+    (["--approx", "II", "--coefficients", "15", "--affine-degrees", "5", "5", "2"],
+     "do not give 15 coefficients"),
+    (["--tank-volume", "0"], "expected a tank volume > 0"),
+    (["--critical-ratio", "0.3"], "belong to --catalog"),
+])
+def test_cli_valve_refusals(argv, message, capsys):
+    assert main(["identify", "valve", str(TABLE), "--no-tank"] + argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_cli_valve_table_refuses_a_negative_leakage(tmp_path, capsys):
+    out = tmp_path / "t.csv"
+    assert main(["identify", "valve-table", str(PLANT), "--out", str(out), "--leakage", "-1"]) == 2
+    assert "leakage" in capsys.readouterr().err and not out.exists()
+
+
+def test_paper_coefficient_counts_select_the_papers_structures(capsys):
+    """Paper 003: 66 = (5+1)(10+1) for approximation I, 15 = 6 + 6 + 3 for II."""
+    assert vf.polynomial_degrees(66) == (5, 10)
+    assert vf.affine_structure(15) == (5, 5, 2, True)
+    assert vf.affine_structure(21) == (5, 5, 2, False)
+    assert vf.affine_count(5, 5, 2, True) == 15
+    assert main(["identify", "valve", str(TABLE), "--approximation", "II", "--coefficients",
+                 "15", "--no-tank", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)["approximation_II"]
+    assert d["psi_in_kg_s"] == d["psi_out_kg_s"] and len(d["phi_kg_s"]) == 6
+    assert len(d["gamma"]) == 2 and d["coefficients"] == 14      # Gamma's constant not stored
+
+
+def test_plant_file_refused_when_flows_exceed_the_stated_conductance(tmp_path, capsys):
+    """A valve of the stated C passes at most C p_up rho0 (choked, ISO 6358): the true
+    valve of the table is within it (to 0.1 %: its rounded underlap opens a full edge to
+    (sqrt(1 + d^2) + 1) / 2 = 1.0006); a base plant with C / 10 is not this valve."""
+    law = vf.valve_flow_law(PLANT, LEAK)
+    assert vf.flow_limit_problems(law, C, P_S, P_ATM, (0.0, 10.0), tolerance=1e-3) == []
+    assert len(vf.flow_limit_problems(law, C / 10, P_S, P_ATM, (0.0, 10.0))) == 2
+    small = tmp_path / "small.toml"
+    small.write_text(PLANT.read_text().replace("sonic_conductance = 6.25e-8",
+                                               "sonic_conductance = 6.25e-9"))
+    out = tmp_path / "fitted.toml"
+    assert main(["identify", "valve", str(TABLE), "--approx", "II", "--no-tank",
+                 "--plant-toml", str(out), "--base", str(small)]) == 2
+    assert "exceeds the choked flow" in capsys.readouterr().err and not out.exists()
+
+
+def _catalog_csv(path, q_full=1524.0):
+    u = np.linspace(0.0, 10.0, 21)
+    q = q_full * np.clip((u - 5.0) / 5.0, -1.0, 1.0)
+    path.write_text("u,q_n\n" + "".join(f"{a!r},{b!r}\n" for a, b in zip(u.tolist(), q.tolist())))
+    return u, q
+
+
+def test_catalog_curve_gives_the_iso_6358_characteristic(tmp_path, capsys):
+    """Nominal flow at 7 -> 6 bar abs (ISO 6358 nominal, 6 -> 5 bar gauge) with b fixes C
+    = Q_N / (p1 psi(p2/p1)); the table is then C(u) times the ISO law, written out here."""
+    path = tmp_path / "curve.csv"
+    u, q = _catalog_csv(path)
+    curve = vf.load_catalog_curve(path)
+    p1, p2 = 6e5 + P_ATM, 5e5 + P_ATM
+    psi = math.sqrt(1 - ((p2 / p1 - B) / (1 - B)) ** 2)
+    c_full = 1524.0 / 60000.0 / (p1 * psi)
+    assert c_full == pytest.approx(C, rel=0.03)          # physics.md: MPYE-5-1/4 pair
+    assert curve.conductance(B)[-1] == pytest.approx(c_full, rel=1e-12)
+    table = vf.catalog_table(curve, B, P_S)
+    for k in (0, 3, 17, 20):
+        for pv in (P_ATM, 3e5, 5.5e5):
+            got = table.q_m[(table.u == u[k]) & np.isclose(table.p, pv, rtol=1e-9)]
+            ck = abs(q[k]) / 60000.0 / (p1 * psi)
+            want = (float(gas.iso6358_flow(ck, B, P_S, pv)) if q[k] > 0 else
+                    -float(gas.iso6358_flow(ck, B, pv, P_ATM)) if q[k] < 0 else 0.0)
+            if pv in table.p:
+                assert got[0] == pytest.approx(want, rel=1e-12, abs=1e-15)
+    assert main(["identify", "valve", str(path), "--catalog", "--critical-ratio", str(B),
+                 "--supply-pressure", str(P_S), "--no-tank", "--out", str(tmp_path / "o")]) == 0
+    assert (tmp_path / "o" / "valve_fit.json").exists()
+    capsys.readouterr()
+    assert main(["identify", "valve", str(path), "--catalog", "--no-tank"]) == 2
+    assert "--catalog needs --critical-ratio" in capsys.readouterr().err
+    with pytest.raises(InputError, match="0 < b < 1"):
+        vf.catalog_table(curve, 1.5, P_S)
+    path.write_text("u,q_n\n0,-1000\n4,200\n5,0\n10,1500\n")
+    with pytest.raises(InputError, match="wrong sign"):
+        vf.catalog_table(vf.load_catalog_curve(path), B, P_S)
+    path.write_text("u,q_n\n5,0\n7,300\n10,1500\n")
+    with pytest.raises(InputError, match="no data for psi_out"):
+        vf.fit_affine(vf.catalog_table(vf.load_catalog_curve(path), B, P_S))
+
+
+def test_flow_stage_calibration_and_refusals():
+    """FlowStage.calibrated puts the centred port at rest at the given pressure: checked
+    with the ISO 6358 law written out here (q_reference's formula, no shared code)."""
+    st = vf.FlowStage.calibrated(5.1e5)
+    b, d = st.critical_pressure_ratio, st.underlap
+
+    def q(p):                                    # centred spool: both restrictions d/2 open
+        def iso(c, p1, p2):
+            x = p2 / p1
+            return c * p1 * 1.185 * (1.0 if x <= b else math.sqrt(1 - ((x - b) / (1 - b)) ** 2))
+        return 0.5 * d * (iso(st.inlet_conductance, st.supply_pressure, p)
+                          - iso(st.exhaust_conductance, p, st.atmospheric_pressure))
+    assert optimize.brentq(q, 2e5, 6.9e5, xtol=1e-6) == pytest.approx(5.1e5, abs=1e-3)
+    assert st.flow(5.1e5, 0.0) == pytest.approx(0.0, abs=1e-15)
+    for kw, where in (({"underlap": 1.5}, "underlap"), ({"critical_pressure_ratio": 1.0}, "0 < b < 1"),
+                      ({"supply_pressure": 5e4}, "supply")):
+        with pytest.raises(InputError, match=where):
+            vf.FlowStage(**kw)
+    with pytest.raises(InputError, match="between atmosphere"):
+        vf.FlowStage.calibrated(8e5)

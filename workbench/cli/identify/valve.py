@@ -6,7 +6,6 @@ import argparse
 import json
 import math
 import shlex
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,10 +26,13 @@ def _lazy(name: str):
     return call
 
 
-(ValveFitReport, analyse, centre_dense_commands, compare_pressure_gain, generate_valve_table,
- load_valve_table, valve_flow_law, write_figures) = map(_lazy, (
-    "ValveFitReport", "analyse", "centre_dense_commands", "compare_pressure_gain",
-    "generate_valve_table", "load_valve_table", "valve_flow_law", "write_figures"))
+(ValveFitReport, affine_count, affine_structure, analyse, catalog_table, centre_dense_commands,
+ compare_pressure_gain, flow_limit_problems, generate_valve_table, load_catalog_curve,
+ load_valve_table, polynomial_degrees, valve_flow_law, write_figures) = map(_lazy, (
+    "ValveFitReport", "affine_count", "affine_structure", "analyse", "catalog_table",
+    "centre_dense_commands", "compare_pressure_gain", "flow_limit_problems",
+    "generate_valve_table", "load_catalog_curve", "load_valve_table", "polynomial_degrees",
+    "valve_flow_law", "write_figures"))
 
 __all__ = ["add_valve"]
 
@@ -49,15 +51,27 @@ def add_valve(subparsers) -> None:
                     "(or against --reference-plant's valve when the table was generated).",
         epilog="Example: workbench identify valve tests/data/valve/rig25_table.csv --approx both "
                "--out fit/ --plant-toml fitted.toml --base designs/plants/rig25_mpye.toml")
-    v.add_argument("table", metavar="TABLE.csv", help="valve table")
-    v.add_argument("--approx", choices=("I", "II", "both"), default="both",
-                   help="which approximation (default both)")
+    v.add_argument("table", metavar="TABLE.csv",
+                   help="valve table (or, with --catalog, a nominal-flow curve u, q_n)")
+    v.add_argument("--approx", "--approximation", dest="approx", choices=("I", "II", "both"),
+                   default="both", help="which approximation (default both)")
+    v.add_argument("--coefficients", type=int, metavar="N",
+                   help="number of coefficients counted as paper 003 does: approximation I "
+                        "(n+1)(m+1) (66: n = 5, m = 10), II (phi+1) + (psi+1) per branch + "
+                        "(l+1) (15: degrees 5 5 2 with one psi; 21: two psi). Needs --approx "
+                        "I or II")
+    v.add_argument("--shared-psi", action="store_true",
+                   help="approximation II: one psi for inlet and exhaust (paper 003's count)")
+    v.add_argument("--phi-from", choices=("fit", "centre"), default="fit",
+                   help="approximation II: fit phi with the rest (default) or to the centred "
+                        "command's column alone (q(p, centre) = phi(p): the leakage measured "
+                        "directly; keeps the tank's time constant at the centre)")
     v.add_argument("--degrees", nargs=2, type=int, metavar=("N", "M"),
                    help="approximation I degrees in p and u (default 5 10, paper 003)")
     v.add_argument("--select", action="store_true",
                    help="choose approximation I degrees by 5-fold cross validation "
                         "(n 1..7, m 1..12)")
-    v.add_argument("--affine-degrees", nargs=3, type=int, default=[5, 5, 2],
+    v.add_argument("--affine-degrees", nargs=3, type=int, default=None,
                    metavar=("PHI", "PSI", "GAMMA"),
                    help="approximation II: degree of phi (-1: phi = 0), of psi_in/psi_out, "
                         "and number of odd Gamma terms (default 5 5 2, paper 003)")
@@ -80,8 +94,30 @@ def add_valve(subparsers) -> None:
                    help="write a copy of --base with its valve replaced by the fitted "
                         "approximation II")
     v.add_argument("--base", metavar="PLANT.toml", help="plant file for --plant-toml")
+    _add_valve_checks(v)
     v.set_defaults(func=_cmd_valve)
+    _add_valve_table(subparsers)
 
+
+def _add_valve_checks(v) -> None:
+    """The plausibility and catalog options of ``identify valve``."""
+    v.add_argument("--plausibility-tolerance", type=float, default=0.25, metavar="F",
+                   help="--plant-toml is refused when the fitted law's flow anywhere in the "
+                        "table's range exceeds the ISO 6358 choked flow of --base's sonic "
+                        "conductance by more than this fraction (default 0.25)")
+    v.add_argument("--catalog", action="store_true",
+                   help="TABLE.csv is a datasheet curve: columns u (V) and q_n (nominal flow, "
+                        "l/min ANR, > 0 into the port, < 0 to the exhaust) at ISO 6358 "
+                        "nominal conditions; with --critical-ratio and --supply-pressure the "
+                        "ISO 6358 law makes the table that is fitted")
+    v.add_argument("--critical-ratio", type=float, metavar="B",
+                   help="--catalog: the datasheet's critical pressure ratio b")
+    v.add_argument("--supply-pressure", type=float, metavar="PA",
+                   help="--catalog: supply pressure of the table, Pa absolute")
+
+
+def _add_valve_table(subparsers) -> None:
+    """Add ``workbench identify valve-table``."""
     g = subparsers.add_parser(
         "valve-table", help="generate a valve table from a plant's four-edge valve",
         description="Write a valve table CSV (u, p, q_m) from the plant file's valve (four "
@@ -103,8 +139,67 @@ def add_valve(subparsers) -> None:
     g.set_defaults(func=_cmd_valve_table)
 
 
+def _check_valve_args(args: argparse.Namespace) -> None:
+    """Refuse option values and combinations the fit cannot honour, before any work."""
+    if args.leakage is not None:
+        if not (math.isfinite(args.leakage) and 0.0 <= args.leakage < 1.0):
+            raise InputError(f"expected an underlap leakage in [0, 1) of the command span, "
+                             f"got {args.leakage!r}", location="--leakage")
+        if not args.reference_plant:
+            raise InputError("--leakage describes --reference-plant's valve; give "
+                             "--reference-plant PLANT.toml or drop --leakage",
+                             location="--leakage")
+    if not (math.isfinite(args.tank_volume) and args.tank_volume > 0):
+        raise InputError(f"expected a tank volume > 0 m^3, got {args.tank_volume!r}",
+                         location="--tank-volume")
+    if not (math.isfinite(args.plausibility_tolerance) and args.plausibility_tolerance >= 0):
+        raise InputError(f"expected a tolerance >= 0, got {args.plausibility_tolerance!r}",
+                         location="--plausibility-tolerance")
+    if args.coefficients is not None:
+        if args.approx == "both":
+            raise InputError("--coefficients names one approximation's size: add --approx I "
+                             "or --approx II", location="--coefficients")
+        if args.approx == "I":
+            n_m = polynomial_degrees(args.coefficients)
+            if args.degrees and tuple(args.degrees) != n_m and \
+                    (args.degrees[0] + 1) * (args.degrees[1] + 1) != args.coefficients:
+                raise InputError(f"--degrees {args.degrees[0]} {args.degrees[1]} give "
+                                 f"{(args.degrees[0] + 1) * (args.degrees[1] + 1)} coefficients, "
+                                 f"not {args.coefficients}", location="--coefficients")
+            args.degrees = args.degrees or list(n_m)
+        else:
+            phi, psi, gam, shared = affine_structure(args.coefficients)
+            if args.affine_degrees is not None and affine_count(
+                    None if args.affine_degrees[0] < 0 else args.affine_degrees[0],
+                    args.affine_degrees[1], args.affine_degrees[2],
+                    args.shared_psi) != args.coefficients:
+                raise InputError(f"--affine-degrees {' '.join(map(str, args.affine_degrees))} "
+                                 f"do not give {args.coefficients} coefficients",
+                                 location="--coefficients")
+            if args.affine_degrees is None:
+                args.affine_degrees, args.shared_psi = [phi, psi, gam], shared
+    if args.affine_degrees is None:
+        args.affine_degrees = [5, 5, 2]
+    if args.catalog and (args.critical_ratio is None or args.supply_pressure is None):
+        raise InputError("--catalog needs --critical-ratio B (the datasheet's b) and "
+                         "--supply-pressure PA (absolute)", location="--catalog")
+    if not args.catalog and (args.critical_ratio is not None or args.supply_pressure is not None):
+        raise InputError("--critical-ratio and --supply-pressure belong to --catalog",
+                         location="--catalog")
+
+
+def _load_table(args: argparse.Namespace):
+    if not args.catalog:
+        return load_valve_table(args.table)
+    return catalog_table(load_catalog_curve(args.table), args.critical_ratio, args.supply_pressure)
+
+
 def _cmd_valve(args: argparse.Namespace) -> int:
-    table = load_valve_table(args.table)
+    _check_valve_args(args)
+    if args.out:
+        from ...output import check_output_dir
+        check_output_dir(args.out)
+    table = _load_table(args)
     if args.plant_toml and not args.base:
         raise InputError("--plant-toml needs --base PLANT.toml (the plant whose valve is "
                          "replaced by the fitted law)", location="--plant-toml")
@@ -116,16 +211,19 @@ def _cmd_valve(args: argparse.Namespace) -> int:
     report = analyse(table, approx=args.approx,
                      degrees=tuple(args.degrees) if args.degrees else None, select=args.select,
                      affine_degrees=(phi_deg, args.affine_degrees[1], args.affine_degrees[2]),
-                     pin_ends=args.pin_ends, tank_volume=args.tank_volume, tank=not args.no_tank,
+                     pin_ends=args.pin_ends, shared_psi=args.shared_psi, phi_from=args.phi_from,
+                     tank_volume=args.tank_volume, tank=not args.no_tank,
                      reference=_valve_reference(args, table))
     result = report.to_dict()
     if args.plant_toml:
         report = _write_plant_toml(args, base, table, report, result)
     if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "valve_fit.json", json.dumps(result, indent=2) + "\n")
-        result["files"] = ["valve_fit.json"] + ([] if args.no_plot else write_figures(report, out))
+        from ...output import result_set
+        inputs = [args.table, args.base, args.reference_plant, args.plant_toml]
+        with result_set(args.out, inputs=inputs) as stage:     # all files or none
+            (stage / "valve_fit.json").write_text(json.dumps(result, indent=2) + "\n")
+            result["files"] = ["valve_fit.json"] + ([] if args.no_plot
+                                                    else write_figures(report, stage))
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -150,8 +248,19 @@ def _valve_reference(args: argparse.Namespace, table):
 
 def _write_plant_toml(args: argparse.Namespace, base: PlantParams, table,
                       report: ValveFitReport, result: dict[str, Any]) -> ValveFitReport:
-    """--plant-toml: --base with approximation II; a supply mismatch becomes a note."""
+    """--plant-toml: --base with approximation II, written only if its flows are plausible
+    for --base's stated conductance; a supply mismatch becomes a note."""
     new = base.replace(**report.approx_2.plant_values())
+    if base.get("valve.sonic_conductance") is not None:
+        problems = flow_limit_problems(
+            report.approx_2.flow, base["valve.sonic_conductance"], table.supply_pressure,
+            table.atmospheric_pressure, table.command_range, table.temperature,
+            tolerance=args.plausibility_tolerance)
+        if problems:
+            raise InputError("the fitted law is not plausible for this valve, not writing it: "
+                             + "; ".join(problems) + " (a table that does not cover the "
+                             "range, or a different valve than --base states)",
+                             location="--plant-toml")
     new.to_toml(args.plant_toml)
     result["plant_toml"] = str(args.plant_toml)
     p_base, p_tab = base["supply.pressure"], table.supply_pressure
@@ -174,9 +283,14 @@ def _print_valve(report: ValveFitReport, table) -> None:
             continue
         qd = fit.quality
         what = (f"n = {fit.degrees[0]}, m = {fit.degrees[1]}" if lab.endswith(" I")
-                else f"phi {len(fit.phi) - 1 if any(fit.phi) else '-'}, psi {len(fit.psi_in) - 1}, "
+                else f"phi {len(fit.phi) - 1 if any(fit.phi) else '-'}, psi {len(fit.psi_in) - 1}"
+                     f"{' (one for both directions)' if fit.psi_in == fit.psi_out else ''}, "
                      f"Gamma {len(fit.gamma)} odd terms")
-        print(f"  {lab:<17} {what}: {qd.coefficients} coefficients ({qd.free} free), "
+        paper = (qd.coefficients if lab.endswith(" I") else affine_count(
+            len(fit.phi) - 1 if any(fit.phi) else None, len(fit.psi_in) - 1, len(fit.gamma),
+            fit.psi_in == fit.psi_out))
+        print(f"  {lab:<17} {what}: {paper} coefficients by paper 003's count, "
+              f"{qd.coefficients} stored ({qd.free} free), "
               f"R = {qd.r:.5f}, errors max {qd.max_error_g_s:.3f} g/s, RMS {qd.rms_g_s:.3f} g/s")
     refs = [r for r in ("data", report.reference) if r in report.gains]
     for lab, g in report.gains.items():

@@ -39,20 +39,33 @@ Examples
 Modules: :mod:`.table` (the table format), :mod:`.generator` (tables from a plant's
 valve), :mod:`.polynomial` (approximation I), :mod:`.affine` (approximation II),
 :mod:`.quality` (R and errors), :mod:`.gain` (pressure gain characteristic),
-:mod:`.tank` (tank step tests), :mod:`.report` (all at once, figures).
+:mod:`.tank` (tank step tests), :mod:`.report` (all at once, figures),
+:mod:`.flow_stage` (a 3/2 flow stage like paper 003's, the known law of ``designs/paper_003.py``),
+:mod:`.catalog` (datasheet nominal-flow curves), :mod:`.counts` (degrees from paper 003's
+coefficient counts), :mod:`.plausibility` (flow limits before a fit is written to a plant).
 
 Command line (:mod:`workbench.cli.identify`): ``workbench identify valve TABLE.csv
 --approx both --out DIR`` and ``workbench identify valve-table PLANT.toml --out
-TABLE.csv`` (the generator).
+TABLE.csv`` (the generator). ``--approximation II --coefficients 15`` picks paper 003's
+structure by its coefficient count (:mod:`.counts`), ``--phi-from centre`` holds phi at the
+centred column, ``--catalog --critical-ratio B --supply-pressure P`` fits a datasheet
+nominal-flow curve (:mod:`.catalog`), and ``--plant-toml`` is refused when the fitted
+law's flows exceed the ISO 6358 choked flow of the base plant's conductance
+(:mod:`.plausibility`). Fits refuse what the data cannot determine (a polynomial degree
+beyond the distinct pressures, a flow direction without data).
 """
 
 from __future__ import annotations
 
 from .affine import PRESSURE_SCALE, AffineTableFit, fit_affine
+from .catalog import CatalogCurve, catalog_table, load_catalog_curve
+from .counts import affine_count, affine_structure, polynomial_degrees
+from .flow_stage import FlowStage, chebyshev_pressures
 from .gain import (PressureGain, TableLaw, compare_pressure_gain, pressure_gain,
                    pressure_gain_from_data)
 from .generator import centre_dense_commands, generate_valve_table, valve_flow_law
 from .lstsq import serial_blas
+from .plausibility import flow_limit_problems
 from .polynomial import DegreeSelection, PolynomialValveFit, fit_polynomial, select_degrees
 from .quality import FitQuality
 from .report import ValveFitReport, analyse, valve_curves, write_figures
@@ -63,6 +76,8 @@ __all__ = [
     "COLUMNS", "MIN_POINTS", "G_PER_KG", "PRESSURE_SCALE",
     "ValveTable", "load_valve_table",
     "valve_flow_law", "centre_dense_commands", "generate_valve_table",
+    "FlowStage", "chebyshev_pressures", "CatalogCurve", "load_catalog_curve", "catalog_table",
+    "affine_count", "affine_structure", "polynomial_degrees", "flow_limit_problems",
     "FitQuality", "PolynomialValveFit", "fit_polynomial", "DegreeSelection", "select_degrees",
     "AffineTableFit", "fit_affine", "TableLaw",
     "PressureGain", "pressure_gain", "pressure_gain_from_data", "compare_pressure_gain",

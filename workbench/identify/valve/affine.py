@@ -37,6 +37,8 @@ class AffineTableFit:
     quality : FitQuality on the table (``free`` counts independent parameters).
     normalisation : text of the scale constraint (Gamma(1) = 1).
     pin_ends : whether q(p_supply, s = 1) = 0 and q(p_atm, s = -1) = 0 were imposed.
+    phi_from : ``"fit"`` (phi fitted with the rest) or ``"centre"`` (phi fitted to the
+        centred command's column alone, then held: q(p, centre) = phi(p) by the form).
     supply_pressure, atmospheric_pressure : Pa, used by ``pin_ends``.
     solver_status : IPOPT's return status. iterations : its iteration count.
 
@@ -65,6 +67,7 @@ class AffineTableFit:
     atmospheric_pressure: float
     solver_status: str
     iterations: int
+    phi_from: str = "fit"
 
     @property
     def phi(self) -> tuple[float, ...]:
@@ -129,6 +132,7 @@ class AffineTableFit:
                 "command_variable": f"s = (u - {self.center!r}) / {self.span!r}, "
                                     "clipped to [-1, 1]",
                 "normalisation": self.normalisation, "pin_ends": self.pin_ends,
+                "phi_from": self.phi_from,
                 "solver_status": self.solver_status, "iterations": self.iterations,
                 **self.quality.to_dict()}
 
@@ -142,7 +146,7 @@ def _to_bar_monomials(coeffs: np.ndarray, offset_bar: float, scale_bar: float) -
 
 def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 5,
                gamma_degree: int = 2, *, pin_ends: bool = False, monotone: bool = True,
-               shared_psi: bool = False, center: float | None = None,
+               shared_psi: bool = False, phi_from: str = "fit", center: float | None = None,
                span: float | None = None, print_level: int = 0) -> AffineTableFit:
     """Approximation II with constraints, by CasADi + IPOPT (paper 003, eq. 5).
 
@@ -169,10 +173,22 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
     ``shared_psi`` uses one psi for inlet and exhaust (paper 003's count, see
     :class:`AffineTableFit`).
 
+    ``phi_from="centre"`` fits phi by linear least squares to the column of the centred
+    command (s = 0) alone and holds it: because Gamma(0) = 0 the form says q(p, centre)
+    = phi(p), so the leakage polynomial is measured directly, and the equilibrium of
+    the centred valve and its slope Cp = -phi'(p_e) (the tank's time constant) are
+    those of the data, not a compromise with the open-valve points. With ``"fit"``
+    phi is fitted with everything else (paper 003's nonlinear regression).
+
     Raises
     ------
     InputError
-        Bad degrees, or fewer points than unknowns.
+        Bad degrees, fewer points than unknowns, or data that cannot determine the
+        unknowns: a pressure polynomial of degree n needs more than n distinct
+        pressures (phi over the table, psi_in among the points with u above the
+        centre, psi_out below it), a flow direction without data for its psi, Gamma
+        with more odd terms than distinct openings on a side, ``phi_from="centre"``
+        without a centred column of enough pressures. The message says which.
     WorkbenchError
         IPOPT fails.
     """
@@ -180,15 +196,23 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
         raise InputError(f"expected degrees phi >= 0 (or none), psi >= 0, gamma >= 1; got "
                          f"{phi_degree}, {psi_degree}, {gamma_degree}",
                          location="--affine-degrees")
+    if phi_from not in ("fit", "centre"):
+        raise InputError(f"expected phi_from 'fit' or 'centre', got {phi_from!r}",
+                         location="--phi-from")
     center, span = _normalised_command(table, center, span)
     pb = _affine_problem(table, center, span, phi_degree, psi_degree, gamma_degree,
                          shared_psi, pin_ends)
+    _check_determined(pb, table.source)
+    phi_fixed = _centre_phi(pb, table.source) if phi_from == "centre" else None
     w, f, g = _affine_nlp(pb)
     cons, lbg, ubg = _affine_constraints(pb, g, monotone, pin_ends)
     solver = ca.nlpsol("valve_affine", "ipopt", {"x": w, "f": f, "g": ca.vertcat(*cons)},
                        {"ipopt.print_level": int(print_level), "print_time": False,
                         "ipopt.tol": 1e-12, "ipopt.max_iter": 500, "ipopt.sb": "yes"})
-    sol = solver(x0=_affine_start(pb), lbg=lbg, ubg=ubg)
+    lbx, ubx = np.full(w.numel(), -np.inf), np.full(w.numel(), np.inf)
+    if phi_fixed is not None:
+        lbx[:pb.n_phi] = ubx[:pb.n_phi] = phi_fixed
+    sol = solver(x0=_affine_start(pb, phi_fixed), lbg=lbg, ubg=ubg, lbx=lbx, ubx=ubx)
     stats = solver.stats()
     status = str(stats.get("return_status", "unknown"))
     if not stats.get("success", False) and status not in ("Solved_To_Acceptable_Level",):
@@ -201,7 +225,8 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
                          pressure_range=(lo, hi), points=len(pb.q))
     q_fit = np.asarray(_numeric(lambda p, u: law.flow(p, _clip((u - center) / span, -1.0, 1.0)))(
         table.p, table.u), dtype=float)
-    quality = _quality(table, q_fit, n_stored, pb.n_free)
+    quality = _quality(table, q_fit, n_stored,
+                       pb.n_free - (pb.n_phi if phi_fixed is not None else 0))
     law = AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
                          pressure_scale=PRESSURE_SCALE, rms=quality.rms,
                          max_error=quality.max_error, pressure_range=(lo, hi), points=len(pb.q))
@@ -209,7 +234,53 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
                           normalisation="Gamma(1) = 1", pin_ends=bool(pin_ends),
                           supply_pressure=table.supply_pressure,
                           atmospheric_pressure=table.atmospheric_pressure,
-                          solver_status=status, iterations=int(stats.get("iter_count", -1)))
+                          solver_status=status, iterations=int(stats.get("iter_count", -1)),
+                          phi_from=phi_from)
+
+
+def _check_determined(pb: "_AffineProblem", source: str) -> None:
+    """Refuse unknowns the data cannot determine (distinct pressures and openings)."""
+    def distinct(sel):
+        return len(np.unique(pb.x[sel]))
+    every = np.ones(len(pb.q), bool)
+    if pb.n_phi and distinct(every) < pb.n_phi:
+        raise InputError(f"phi of degree {pb.n_phi - 1} needs at least {pb.n_phi} distinct "
+                         f"pressures; the table has {distinct(every)}: a polynomial through "
+                         "fewer pressures than coefficients is free between them (lower the "
+                         "degree)", source=source, location="--affine-degrees")
+    sides = ([("psi (shared)", pb.s != 0)] if pb.shared_psi else
+             [("psi_in (flow from the supply, u above the centre)", pb.s > 0),
+              ("psi_out (flow to the exhaust, u below the centre)", pb.s < 0)])
+    for name, sel in sides:
+        if not np.any(sel):
+            raise InputError(f"no data for {name}: the table has no command on that side of "
+                             "the centre, so that flow direction cannot be fitted (measure "
+                             "it, or fit one shared psi)", source=source, location="table")
+        if distinct(sel) < pb.n_psi:
+            raise InputError(f"{name} of degree {pb.n_psi - 1} needs at least {pb.n_psi} "
+                             f"distinct pressures among its points; the table has "
+                             f"{distinct(sel)} (lower the psi degree)", source=source,
+                             location="--affine-degrees")
+    for side, sel in (("above", pb.s > 0), ("below", pb.s < 0)):
+        n_open = len(np.unique(np.abs(pb.s[sel])))
+        if np.any(sel) and n_open < pb.n_gam:
+            raise InputError(f"Gamma with {pb.n_gam} odd terms needs at least {pb.n_gam} "
+                             f"distinct commands {side} the centre; the table has {n_open}",
+                             source=source, location="--affine-degrees")
+
+
+def _centre_phi(pb: "_AffineProblem", source: str) -> np.ndarray:
+    """phi (scaled, g/s) by least squares on the centred column: q(p, centre) = phi(p)."""
+    sel = np.abs(pb.s) < 1e-12
+    if pb.n_phi == 0:
+        raise InputError("phi from the centre needs a phi polynomial (its degree is -1)",
+                         location="--phi-from")
+    n_p = len(np.unique(pb.x[sel]))
+    if n_p < pb.n_phi:
+        raise InputError(f"phi from the centre needs the centred command (s = 0) measured at "
+                         f"{pb.n_phi} or more distinct pressures; the table has {n_p} there",
+                         source=source, location="--phi-from")
+    return _lstsq(pb.phi_basis[sel], pb.q[sel])
 
 
 @dataclass(frozen=True)
@@ -315,15 +386,18 @@ def _affine_constraints(pb: _AffineProblem, unknowns, monotone: bool, pin_ends: 
     return cons, lbg, ubg
 
 
-def _affine_start(pb: _AffineProblem) -> np.ndarray:
-    """Start: Gamma = s, phi and psi by linear least squares."""
+def _affine_start(pb: _AffineProblem, phi_fixed: np.ndarray | None = None) -> np.ndarray:
+    """Start: Gamma = s, phi (unless held at ``phi_fixed``) and psi by linear least squares."""
     Bp, s = pb.psi_basis, pb.s
-    blocks = [pb.phi_basis] if pb.n_phi else []
+    blocks = [pb.phi_basis] if pb.n_phi and phi_fixed is None else []
     if pb.shared_psi:
         blocks.append(Bp * s[:, None])
     else:
         blocks += [Bp * (s * pb.inlet)[:, None], Bp * (s * pb.outlet)[:, None]]
-    return np.concatenate([_lstsq(np.hstack(blocks), pb.q), np.eye(pb.n_gam)[0]])
+    if phi_fixed is None:
+        return np.concatenate([_lstsq(np.hstack(blocks), pb.q), np.eye(pb.n_gam)[0]])
+    rest = _lstsq(np.hstack(blocks), pb.q - pb.phi_basis @ phi_fixed)
+    return np.concatenate([phi_fixed, rest, np.eye(pb.n_gam)[0]])
 
 
 def _affine_coefficients(pb: _AffineProblem, wv: np.ndarray):

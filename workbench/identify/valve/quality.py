@@ -70,6 +70,10 @@ def _quality(table: ValveTable, q_fit: np.ndarray, coefficients: int, free: int)
 
 
 def _normalised_command(table: ValveTable, center: float | None, span: float | None):
+    if not np.ptp(table.q_m) > 0:
+        raise InputError(f"every flow of the table is {table.q_m[0]:g} kg/s: there is no "
+                         "characteristic to fit (check the q_m column and its unit, kg/s)",
+                         source=table.source, location="column 'q_m'")
     c = table.command_center if center is None else float(center)
     s = table.command_span if span is None else float(span)
     if not s > 0:

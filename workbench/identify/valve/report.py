@@ -84,7 +84,8 @@ class ValveFitReport:
 
 def analyse(table: ValveTable, approx: str = "both", degrees: tuple[int, int] | None = None,
             select: bool = False, affine_degrees: tuple[int | None, int, int] = (5, 5, 2),
-            pin_ends: bool = False, tank_volume: float = 1e-3, tank: bool = True,
+            pin_ends: bool = False, shared_psi: bool = False, phi_from: str = "fit",
+            tank_volume: float = 1e-3, tank: bool = True,
             k: float = 1.2, seed: int = 0, reference: Callable | None = None,
             reference_label: str = "generating valve") -> ValveFitReport:
     """Fit approximation I and/or II, then the pressure gain and tank step validation.
@@ -107,7 +108,8 @@ def analyse(table: ValveTable, approx: str = "both", degrees: tuple[int, int] | 
             n, m = degrees if degrees is not None else (5, 10)
             a1 = fit_polynomial(table, n, m)
     if approx in ("II", "both"):
-        a2 = fit_affine(table, *affine_degrees, pin_ends=pin_ends)
+        a2 = fit_affine(table, *affine_degrees, pin_ends=pin_ends, shared_psi=shared_psi,
+                        phi_from=phi_from)
     lo, hi = table.pressure_range
     gains: dict[str, PressureGain] = {"data": pressure_gain_from_data(table)}
     cu = np.unique(table.u)

@@ -1,0 +1,473 @@
+"""Paper 003 end to end: the flow stage of a 3/2 servo-distributor and its approximations.
+
+Reproduces Belgharbi, Thomasset, Scavarda, Sesmat, "Analytical model of the flow stage of
+a pneumatic servo-distributor for simulation and nonlinear control" on the workbench:
+
+1. a 3/2 flow stage like the paper's Servotronic (two ISO 6358 restrictions with a
+   rounded underlap, 7 bar abs supply, exhaust to atmosphere), calibrated so that its
+   centred port rests at the paper's 5.1e5 Pa (section 5), measured on a grid with noise
+   (:class:`workbench.identify.valve.FlowStage`);
+2. approximation I (n = 5, m = 10: 66 coefficients; and n = m = 5 as the paper's
+   comparison) and approximation II (the paper's 15 coefficients: one psi for both flow
+   directions; and the two-branch form, with phi fitted freely or from the centred column),
+   with the paper's accuracy figures R and g/s;
+3. the pressure gain characteristic q_m(p_e, u) = 0 of each law against the true valve;
+4. the closed 1 l tank (k = 1.2) after +-1 V and +-0.1 V steps at u_e = 0 V, with the
+   errors against the true valve, and a measured decomposition of the end-pressure error
+   (flow error at the end divided by the tank's restoring slope Cp there);
+5. the tangent model (Cp, Gu, tau, G) of every approximation beside the true valve's,
+   with the reason where it is poor.
+
+Writes ``DIR/report.html`` and ``report.pdf`` (first table: paper value | workbench
+value | how obtained | agrees?), ``summary.json`` (``paper_results``) and
+``valve_table.csv`` (the measured table, re-fittable with ``workbench identify valve``).
+
+Usage: python designs/paper_003.py [--quick] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from workbench import report as rp
+from workbench.identify import plots
+from workbench.identify import valve as vf
+from workbench.params import atomic_write_text
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+TITLE = "Paper 003: flow stage of a 3/2 servo-distributor, approximations I and II"
+
+#: Paper 003's numbers, each with where it is stated.
+PAPER = {
+    "p_e": (5.1, "bar", "sect. 5: equilibrium pressure 5.1 10^5 Pa at u = 0 V"),
+    "coef_I": (66, "-", "sect. 4.2: (n+1)(m+1) = 66 for n = 5, m = 10"),
+    "R_I": (0.99, "-", "sect. 4.2: R = 0.99 for all approximations I"),
+    "err_I": (0.4, "g/s", "sect. 4.2, Fig. 4b: errors less than +-0.4 g/s"),
+    "coef_II": (15, "-", "sect. 4.3: (n+1)+(m+1)+(l+1) = 15 for degrees 5, 5, 2"),
+    "R_II": (0.99, "-", "sect. 4.3: R = 0.99"),
+    "err_II": (0.5, "g/s", "sect. 4.3, Fig. 6b: errors less than +-0.5 g/s"),
+    "tank_I": (2.0, "%", "sect. 5, Figs. 9-10: approximation I pressure error less than 2 %"),
+    "points": (201, "-", "sect. 4.2: the table of experimental points contains 201 values"),
+    "volume": (1e-3, "m^3", "sect. 5, Fig. 7: closed tank '(11)' read as 1 l"),
+    "k": (1.2, "-", "sect. 5: polytropic coefficient k = 1.2"),
+}
+#: Assumptions where the paper is silent (stated in the report).
+ASSUMED = {"supply_pressure": 7.0e5, "inlet_conductance": 1.0e-8,
+           "critical_pressure_ratio": 0.3, "underlap": 0.1, "command_span": 10.0,
+           "noise_kg_s": 0.05e-3}
+#: A tangent-model quantity is "poor" when it is off by more than this fraction: the
+#: tank's time constant and gain then differ visibly on a step (paper Fig. 10).
+TANGENT_TOL = 0.2
+STEPS = (1.0, -1.0, 0.1, -0.1)
+
+
+def build_table(quick: bool):
+    """The flow stage and its measured table (21 commands denser near 0 V x 10 pressures)."""
+    stage = vf.FlowStage.calibrated(PAPER["p_e"][0] * 1e5, **{k: v for k, v in ASSUMED.items()
+                                                         if k != "noise_kg_s"})
+    u = vf.centre_dense_commands(0.0, stage.command_span, 21)
+    p = vf.chebyshev_pressures(stage.atmospheric_pressure, stage.supply_pressure, 10)
+    table = stage.table(u, p, noise=ASSUMED["noise_kg_s"], seed=3,
+                        made_with="designs/paper_003.py (FlowStage.calibrated(5.1e5), seed 3)")
+    return stage, table
+
+
+def fit_all(table, quick: bool) -> dict:
+    """Every approximation of the report, by label."""
+    fits = {"I (n=5, m=10)": vf.fit_polynomial(table, 5, 10),
+            "II, 15 coef. (one psi)": vf.fit_affine(table, 5, 5, 2, shared_psi=True),
+            "II, two psi, phi fitted": vf.fit_affine(table, 5, 5, 2),
+            "II, two psi, phi from centre": vf.fit_affine(table, 5, 5, 2, phi_from="centre")}
+    if not quick:
+        fits["I (n=m=5)"] = vf.fit_polynomial(table, 5, 5)
+    return fits
+
+
+def paper_count(fit) -> int:
+    """Coefficients counted as paper 003 counts them: (n+1)(m+1) for I; for II one
+    polynomial per function, Gamma with its forced constant: (n+1) + (m+1) + (l+1)."""
+    if isinstance(fit, vf.PolynomialValveFit):
+        return int(fit.coefficients.size)
+    psi = len(fit.psi_in) * (1 if fit.psi_in == fit.psi_out else 2)
+    return len(fit.phi) + psi + len(fit.gamma) + 1
+
+
+def end_error_budget(tank, stage, fits) -> list[dict]:
+    """Per law and step: the end-pressure error measured, and predicted as the flow error
+    at the true end state divided by the true restoring slope Cp there (first order)."""
+    import casadi as ca
+    from scipy import optimize
+    p, u = ca.SX.sym("p"), ca.SX.sym("u")
+    dq = ca.Function("dq", [p, u], [ca.jacobian(stage.flow(p, u), p)])
+    lo, hi = stage.atmospheric_pressure, stage.supply_pressure
+    rows = []
+    for lab, fit in fits.items():
+        for du in STEPS:
+            uu = tank.u_e + du
+            pe = optimize.brentq(lambda x: float(stage.flow(x, uu)), lo, hi, xtol=1e-6)
+            cp = -float(dq(pe, uu))
+            q_err = float(fit.flow(pe, uu)) - float(stage.flow(pe, uu))
+            g = lambda x: float(fit.flow(x, uu))  # noqa: E731
+            pe_fit = (optimize.brentq(g, lo, hi, xtol=1e-6) if g(lo) > 0 > g(hi) else None)
+            ref, run = tank.steps[("true valve", du)], tank.steps[(lab, du)]
+            k = int(np.argmax(np.abs(run.p - ref.p) / ref.p))
+            p_k = float(ref.p[k])
+            rows.append({"law": lab, "du_V": du, "p_e_true_Pa": pe, "cp_kg_s_Pa": cp,
+                         "worst_t_s": float(ref.t[k]), "worst_p_true_Pa": p_k,
+                         "worst_at_end": bool(abs(run.p[-1] - ref.p[-1]) / ref.p[-1]
+                                              >= 0.8 * np.abs(run.p[k] - ref.p[k]) / p_k),
+                         "flow_error_at_worst_g_s": 1e3 * (float(fit.flow(p_k, uu))
+                                                           - float(stage.flow(p_k, uu))),
+                         "flow_at_worst_g_s": 1e3 * float(stage.flow(p_k, uu)),
+                         "flow_error_g_s": 1e3 * q_err,
+                         "end_error_Pa": float(run.p[-1] - ref.p[-1]),
+                         "gain_error_Pa": None if pe_fit is None else pe_fit - pe,
+                         "flow_error_over_cp_Pa": q_err / cp,
+                         "needed_flow_error_g_s": 1e3 * 0.02 * pe * cp,
+                         "max_error_percent": 100 * tank.max_error(lab, du),
+                         "max_error_of_p_e0_percent": 100 * float(np.max(np.abs(run.p - ref.p)))
+                         / ref.p[0]})
+    return rows
+
+
+def tangent_rows(tank, stage_phi_slope, fits) -> tuple[list, dict]:
+    """Tangent model of each law at (p_e, u_e = 0) and, where poor, the measured reason."""
+    true = tank.steps[("true valve", 1.0)].tangent
+    rows, reasons = [], {}
+    for lab in ["true valve", *fits]:
+        tn = tank.steps[(lab, 1.0)].tangent
+        if tn is None:
+            rows.append([lab, None, None, None, None, None, "no equilibrium at 0 V"])
+            continue
+        r_tau, r_g = tn.tau / true.tau, tn.gain / true.gain
+        poor = lab != "true valve" and max(abs(r_tau - 1), abs(r_g - 1)) > TANGENT_TOL
+        rows.append([lab, tn.p_e / 1e5, tn.cp * 1e8, tn.gu * 1e3, tn.tau, tn.gain / 1e5,
+                     "reference" if lab == "true valve" else
+                     f"tau x{r_tau:.2f}, G x{r_g:.2f}" + (" (poor)" if poor else "")])
+        if poor:
+            reasons[lab] = _tangent_reason(lab, fits[lab], tn, true, stage_phi_slope)
+    return rows, reasons
+
+
+def _tangent_reason(lab, fit, tn, true, centre_slope) -> str:
+    if "one psi" in lab:
+        return (f"{lab}: one psi for both flow directions cannot be zero at supply (inlet) and "
+                f"at atmosphere (exhaust) at once; its whole characteristic is off (R = "
+                f"{fit.quality.r:.3f}), and with it Cp = {tn.cp:.3g} kg/(s Pa) against "
+                f"{true.cp:.3g}.")
+    if "phi fitted" in lab:
+        import casadi as ca
+        p = ca.SX.sym("p")
+        phi = sum(c * (p / 1e5) ** k for k, c in enumerate(fit.phi))
+        slope = -float(ca.Function("s", [p], [ca.jacobian(phi, p)])(tn.p_e))
+        return (f"{lab}: at u = 0 the form gives Cp = -phi'(p_e) alone (Gamma(0) = 0), and "
+                f"the freely fitted phi is a compromise with the open-valve points: -phi'(p_e) = "
+                f"{slope:.3g} kg/(s Pa), while the centred column of the table falls with "
+                f"{centre_slope:.3g} kg/(s Pa) there (the true Cp is {true.cp:.3g}). The "
+                "underlap leakage of a real spool vanishes as it opens, a phi identical for all "
+                "u (paper 003) cannot follow that. Fitting phi to the centred column "
+                "('phi from centre') restores Cp, hence tau.")
+    return (f"{lab}: Cp {tn.cp:.3g} against {true.cp:.3g} kg/(s Pa), Gu {tn.gu:.3g} against "
+            f"{true.gu:.3g} kg/(s V): the polynomial's slopes at the narrow pressure gain "
+            "region are set by the points around it.")
+
+
+def centre_column_slope(table, p_e: float) -> float:
+    """-dq/dp of the table's centred column at p_e by a local quadratic (the measurement)."""
+    cols = [c for c in table.columns() if abs(c[0] - table.command_center) < 1e-12]
+    _, ps, qs = cols[0]
+    j = np.argsort(np.abs(ps - p_e))[:3]
+    c = np.polyfit(ps[j] - p_e, qs[j], 2)
+    return -float(c[1])
+
+
+def paper_rows(stage, table, fits, tank, gains_cmp, full_cmp) -> list[dict]:
+    """The first table: one entry per paper result."""
+    i, ii15, ii = fits["I (n=5, m=10)"], fits["II, 15 coef. (one psi)"], fits["II, two psi, phi fitted"]
+    iic = fits["II, two psi, phi from centre"]
+    tank_i = {du: 100 * tank.max_error("I (n=5, m=10)", du) for du in STEPS}
+
+    def row(key, result, value, how, agrees, unit=None):
+        pv, pu, src = PAPER[key]
+        return {"result": result, "paper": pv, "workbench": value, "unit": unit or pu,
+                "source": src, "how": how, "agrees": bool(agrees)}
+    up = max(tank_i[1.0], tank_i[0.1])
+    down = max(tank_i[-1.0], tank_i[-0.1])
+    rows = [
+        row("p_e", "equilibrium of the centred port", float(tank.steps[("true valve", 1.0)].p_e) / 1e5,
+            "an input: the flow stage is calibrated to it (exhaust conductance), then "
+            "q(p_e, 0) = 0 solved by Brent", abs(tank.steps[("true valve", 1.0)].p_e - 5.1e5) < 500),
+        row("points", "points of the measured table", len(table),
+            "21 commands (denser near 0 V) x 10 Chebyshev pressures", abs(len(table) - 201) < 20),
+        row("coef_I", "approximation I coefficients", paper_count(i), "fit_polynomial(5, 10)",
+            paper_count(i) == 66),
+        row("R_I", "approximation I, R", i.quality.r, "sqrt(1 - SS_res/SS_tot) on the table",
+            i.quality.r >= 0.99),
+        row("err_I", "approximation I, largest flow error", i.quality.max_error_g_s,
+            "max |q_fit - q_table|, table noise 0.05 g/s", i.quality.max_error_g_s <= 0.4),
+        row("coef_II", "approximation II coefficients", paper_count(ii15),
+            "fit_affine(5, 5, 2, shared_psi=True): phi 6 + psi 6 + Gamma 3 (constant 0)",
+            paper_count(ii15) == 15),
+        row("R_II", "approximation II (15 coef.), R", ii15.quality.r, "as for I",
+            ii15.quality.r >= 0.99),
+        row("err_II", "approximation II (15 coef.), largest flow error",
+            ii15.quality.max_error_g_s, "as for I", ii15.quality.max_error_g_s <= 0.5),
+        row("R_II", "approximation II (two psi, 21 coef.), R", ii.quality.r,
+            "fit_affine(5, 5, 2): inlet and exhaust psi", ii.quality.r >= 0.99),
+        row("err_II", "approximation II (two psi), largest flow error", ii.quality.max_error_g_s,
+            "as for I", ii.quality.max_error_g_s <= 0.5),
+        row("err_II", "approximation II (two psi, phi from centre), largest flow error",
+            iic.quality.max_error_g_s, "phi fitted to the centred column, then held",
+            iic.quality.max_error_g_s <= 0.5),
+        row("tank_I", "approximation I tank error, upward steps (+1, +0.1 V)", up,
+            "max |p_I - p_true| / p_true over the run", up <= 2.0),
+        row("tank_I", "approximation I tank error, downward steps (-1, -0.1 V)", down,
+            "as above; see the section on downward steps", down <= 2.0),
+    ]
+    rows.append({"result": "tank errors smaller for u > 0 (approximation I)", "paper": "yes",
+                 "workbench": "yes" if up < down else "no", "unit": "-",
+                 "source": "sect. 5, Fig. 9: 'the errors are smaller for u > 0'",
+                 "how": "largest error of the upward against the downward steps",
+                 "agrees": bool(up < down)})
+    c1, c2 = full_cmp["I (n=5, m=10)"], full_cmp["II, two psi, phi fitted"]
+    e1 = 0.5 * (c1["median_rel_cp"] + c1["median_rel_gu"])
+    e2 = 0.5 * (c2["median_rel_cp"] + c2["median_rel_gu"])
+    rows.append({"result": "Cp, Gu along p_e(u): II closer to the true valve than I",
+                 "paper": "yes ('seems to be better')", "workbench": "yes" if e2 < e1 else "no",
+                 "unit": "-", "source": "sect. 5, Fig. 8: 'the control approximation seems to be "
+                                        "better'",
+                 "how": f"median relative error of Cp and Gu over {c1['commands']} commands: "
+                        f"II {100 * e2:.0f} %, I {100 * e1:.0f} %", "agrees": bool(e2 < e1)})
+    g5 = gains_cmp.get("I (n=m=5)")
+    if g5 is not None:
+        g10, g2 = gains_cmp["I (n=5, m=10)"], gains_cmp["II, two psi, phi fitted"]
+        rows.append({"result": "pressure gain: I (5, 10) better than I (5, 5)", "paper": "yes",
+                     "workbench": "yes" if g10 < g5 else "no", "unit": "-",
+                     "source": "sect. 4.2, Fig. 4a: better for degrees greater than five",
+                     "how": f"max |p_e - p_e,true|: {g10 / 1e5:.3f} against {g5 / 1e5:.3f} bar",
+                     "agrees": bool(g10 < g5)})
+        rows.append({"result": "pressure gain: II better than I (5, 5)", "paper": "yes",
+                     "workbench": "yes" if g2 < g5 else "no", "unit": "-",
+                     "source": "sect. 4.3, Fig. 6a",
+                     "how": f"max |p_e - p_e,true|: {g2 / 1e5:.3f} against {g5 / 1e5:.3f} bar",
+                     "agrees": bool(g2 < g5)})
+    return rows
+
+
+def _fmt(v):
+    return v if isinstance(v, str) else (f"{v:.4g}" if isinstance(v, float) else str(v))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="fewer fits and tank samples")
+    ap.add_argument("--out", default=str(ROOT / "reports" / "paper_003"), help="output folder")
+    args = ap.parse_args(argv)
+    from workbench.errors import InputError
+    from workbench.output import check_output_dir
+    try:
+        check_output_dir(args.out)                 # refused before any work
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return rp.run_design(TITLE, args.out, None, lambda done: _body(args, Path(args.out), done))
+
+
+def _body(args, out: Path, done: list) -> int:
+    t0 = time.perf_counter()
+    with rp.step("flow stage and its table"):
+        stage, table = build_table(args.quick)
+        table.to_csv(out / "valve_table.csv")
+        done.append(_stage_section(stage, table))
+    with rp.step("approximations I and II"):
+        fits = fit_all(table, args.quick)
+        laws = {"true valve": stage.flow, **{k: f.flow for k, f in fits.items()}}
+        done.append(_fit_section(table, fits))
+    with rp.step("pressure gain characteristic"):
+        lo, hi = table.pressure_range
+        fine = np.linspace(-2.0, 2.0, 81 if args.quick else 401)
+        gains = {lab: vf.pressure_gain(f, fine, (lo, hi), label=lab) for lab, f in laws.items()}
+        full_cmp = {lab: vf.compare_pressure_gain(gains["true valve"], g, (lo, hi))
+                    for lab, g in gains.items() if lab != "true valve"}
+        gains_cmp = {lab: c["max_abs_dp_e_Pa"] for lab, c in full_cmp.items()}
+        done.append(_gain_section(gains, gains_cmp))
+    with rp.step("tank steps and tangent models"):
+        tank = vf.tank_steps(laws, "true valve", volume=PAPER["volume"][0], u_e=0.0, steps=STEPS,
+                             k=PAPER["k"][0], p_range=(lo, hi), samples=200 if args.quick else 600)
+        budget = end_error_budget(tank, stage, fits)
+        centre = centre_column_slope(table, tank.steps[("true valve", 1.0)].p_e)
+        trows, reasons = tangent_rows(tank, centre, fits)
+        clean = noise_free_errors(stage, table, tank)
+        done.append(_tank_section(tank, budget, clean))
+        done.append(_tangent_section(trows, reasons))
+    with rp.step("write report"):
+        rows = paper_rows(stage, table, fits, tank, gains_cmp, full_cmp)
+        n_ok = sum(r["agrees"] for r in rows)
+        first = rp.Section("Paper 003 results beside the workbench's", [
+            rp.Table(["result", "paper", "workbench", "unit", "how obtained", "source", "agrees?"],
+                     [[r["result"], _fmt(r["paper"]), _fmt(r["workbench"]), r["unit"], r["how"],
+                       r["source"], r["agrees"]] for r in rows],
+                     caption="Paper value | workbench value | how obtained | agrees?"),
+            rp.Paragraph(f"{n_ok} of {len(rows)} results agree. Every paper value is quoted "
+                         "from paper 003 (section, figure); the flow stage's supply, "
+                         "conductance, critical ratio, underlap and command range are assumed "
+                         "(the paper does not state them, see the next section)."),
+        ])
+        doc = rp.Report(TITLE, subtitle="Belgharbi, Thomasset, Scavarda, Sesmat: analytical model "
+                                        "of the flow stage of a pneumatic servo-distributor",
+                        status=rp.Status("PASS" if n_ok == len(rows) else "NOTE",
+                                         f"{n_ok} of {len(rows)} paper results reproduced"),
+                        sections=[first, *done],
+                        provenance=rp.provenance(command_line=" ".join(sys.argv)))
+        html, pdf = rp.write(doc, out)
+        summary = {"paper": "003", "paper_results": [{k: r[k] for k in ("result", "paper",
+                   "workbench", "unit", "source", "agrees")} for r in rows],
+                   "flow_stage": stage.to_dict(),
+                   "fits": {lab: {**f.quality.to_dict(), "paper_count": paper_count(f)}
+                            for lab, f in fits.items()},
+                   "pressure_gain_max_dp_e_Pa": gains_cmp, "tank_steps": tank.to_dict(),
+                   "end_error_budget": budget, "tangent_reasons": reasons,
+                   "tank_errors_I_noise_free_percent": {str(k): v for k, v in clean.items()},
+                   "quick": bool(args.quick), "run_time_s": time.perf_counter() - t0}
+        atomic_write_text(out / "summary.json",
+                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
+    print(f"paper 003: {n_ok} of {len(rows)} results agree\n  report: {html}\n          {pdf}")
+    return 0
+
+
+def _stage_section(stage, table):
+    return rp.Section("The flow stage (assumptions where the paper is silent)", [
+        rp.Paragraph("Paper 003 characterises one port of the 3/2 Servotronic globally (its "
+                     "Fig. 3) but gives neither the supply pressure nor the conductances. The "
+                     "workbench builds a flow stage of the same structure (Fig. 2: a supply "
+                     "restriction A_S(u) and an exhaust restriction A_E(u), each an ISO 6358 "
+                     "restriction with a rounded underlap) and calibrates the one number the "
+                     "paper gives: the centred port rests at 5.1e5 Pa (section 5). Measurement "
+                     "noise of 0.05 g/s is added to every point."),
+        rp.KeyValues([("flow stage", stage.summary()),
+                      ("exhaust conductance (calibrated)", f"{stage.exhaust_conductance:.4g} m^3/(s Pa)"),
+                      ("full inlet flow", f"{1e3 * stage.max_flow():.3g} g/s"),
+                      ("table", f"{len(table)} points: 21 commands x 10 pressures (paper: 201)")]),
+    ])
+
+
+def _fit_section(table, fits):
+    rows = [[lab, paper_count(f), f.quality.free, f.quality.r, f.quality.max_error_g_s,
+             f.quality.rms_g_s] for lab, f in fits.items()]
+    errors = {lab: f.flow(table.p, table.u) - table.q_m for lab, f in list(fits.items())[:3]}
+    return rp.Section("Approximations and their accuracy", [
+        rp.Table(["approximation", "coefficients (paper count)", "free", "R", "max error",
+                  "RMS error"], rows, units=["", "-", "-", "-", "g/s", "g/s"],
+                 caption="Accuracy on the measured table (paper: R = 0.99; I < 0.4 g/s, II < 0.5 g/s)"),
+        rp.Paragraph("Reading paper 003's 15: its count (n+1) + (m+1) + (l+1) has one psi "
+                     "polynomial, while its text and Fig. 5b give psi two branches, one for the "
+                     "inlet (Gamma > 0) and one for the exhaust (Gamma < 0). Either the paper "
+                     "counts the two-branch law once (it then has 21 coefficients by the same "
+                     "count: row 'II, two psi'), or one psi serves both directions (15 "
+                     "coefficients: row 'II, 15 coef.'). The table measures both: one psi "
+                     f"reaches R = {fits['II, 15 coef. (one psi)'].quality.r:.3f} only, since "
+                     "the inlet law vanishes at supply and the exhaust law at atmosphere; the "
+                     "two-branch law meets the paper's R and error bound. The workbench takes "
+                     "the first reading as the paper's approximation II."),
+        rp.Figure(plots.valve_error_figure(table.u, table.p, errors),
+                  "Flow errors over the table (paper Figs. 4b and 6b)"),
+    ])
+
+
+def _gain_section(gains, cmp_):
+    rows = [[lab, None if v is None else v / 1e5] for lab, v in cmp_.items()]
+    return rp.Section("Pressure gain characteristic", [
+        rp.Table(["law", "max |p_e - p_e,true|"], rows, units=["", "bar"],
+                 caption="Equilibrium pressure error where the true equilibrium is inside the range"),
+        rp.Figure(plots.pressure_gain_figure(list(gains.values()), u_range=(-1.5, 1.5)),
+                  "q_m(p_e, u) = 0 with Cp and Gu along it (paper Figs. 3d, 4a, 6a, 8)"),
+    ])
+
+
+def _tank_section(tank, budget, clean):
+    keep = ("true valve", "I (n=5, m=10)", "II, two psi, phi fitted", "II, two psi, phi from centre")
+    shown = vf.TankStepTests(volume=tank.volume, k=tank.k, temperature=tank.temperature,
+                             u_e=tank.u_e, reference=tank.reference,
+                             steps={k: v for k, v in tank.steps.items() if k[0] in keep})
+    rows = [[b["law"], b["du_V"], b["max_error_percent"], b["max_error_of_p_e0_percent"],
+             b["p_e_true_Pa"] / 1e5,
+             b["flow_error_g_s"], b["cp_kg_s_Pa"] * 1e8, b["end_error_Pa"] / 1e5,
+             None if b["gain_error_Pa"] is None else b["gain_error_Pa"] / 1e5,
+             b["flow_error_over_cp_Pa"] / 1e5] for b in budget]
+    return rp.Section("Tank steps and the downward-step errors", [
+        rp.Paragraph("'max error' is |p - p_true| / p_true, the strict reading of paper 003's "
+                     "'pressure error'; the paper does not say relative to what, so 'of 5.1 bar' "
+                     "gives the same largest |p - p_true| relative to the starting equilibrium."),
+        rp.Paragraph("The end error equals the error of the law's pressure gain characteristic "
+                     "at the new command (columns 'end error' and 'p_e error'), as paper 003 "
+                     "notes in section 5, and that is the flow error there divided by the "
+                     "tank's restoring slope Cp (last column, first order). "
+                     + _downward_text(budget, clean)),
+        rp.Figure(plots.tank_steps_figure(shown), "Closed 1 l tank, k = 1.2, steps at u_e = 0 V "
+                                                  "(paper Figs. 9 and 10); the 15-coefficient "
+                                                  "and n = m = 5 fits are in the table only"),
+        rp.Table(["law", "step", "max error", "of 5.1 bar", "true p_e", "flow error at p_e",
+                  "true Cp at p_e", "end error", "p_e error", "flow error / Cp"], rows,
+                 units=["", "V", "%", "%", "bar", "g/s", "1e-8 kg/(s Pa)", "bar", "bar", "bar"],
+                 caption="Where the tank errors come from: the end error is the flow error at "
+                         "the true end state divided by the restoring slope Cp there"),
+    ])
+
+
+def noise_free_errors(stage, table, tank) -> dict[float, float]:
+    """Approximation I (5, 10) fitted to the same grid without noise: its tank errors, %."""
+    clean = stage.table(table.u, table.p, noise=0.0)
+    fit = vf.fit_polynomial(clean, 5, 10)
+    tk = vf.tank_steps({"true valve": stage.flow, "I": fit.flow}, "true valve", volume=tank.volume,
+                       u_e=tank.u_e, steps=STEPS, k=tank.k, p_range=clean.pressure_range,
+                       samples=len(tank.steps[("true valve", 1.0)].t))
+    return {du: 100 * tk.max_error("I", du) for du in STEPS}
+
+
+def _downward_text(budget, clean: dict) -> str:
+    """Why approximation I exceeds 2 % on a step, from the measured budget."""
+    parts = []
+    for b in budget:
+        if not b["law"].startswith("I (n=5, m=10") or b["max_error_percent"] <= 2:
+            continue
+        if b["worst_at_end"]:
+            parts.append(
+                f"After {b['du_V']:+g} V the error ({b['max_error_percent']:.1f} %) is the end "
+                f"error: Cp there is {b['cp_kg_s_Pa']:.3g} kg/(s Pa), so 2 % of "
+                f"{b['p_e_true_Pa'] / 1e5:.2f} bar needs a flow error below "
+                f"{b['needed_flow_error_g_s']:.3f} g/s; the fit's is {b['flow_error_g_s']:.3f} "
+                "g/s, within the table's 0.05 g/s measurement noise: no fit of this table can "
+                f"promise 2 % there (fitted to the same grid without noise: "
+                f"{clean[b['du_V']]:.2f} %).")
+        else:
+            parts.append(
+                f"After {b['du_V']:+g} V the worst error ({b['max_error_percent']:.1f} %) is "
+                f"in the transient at {b['worst_t_s']:.1f} s and {b['worst_p_true_Pa'] / 1e5:.2f} "
+                f"bar, where the true flow is {b['flow_at_worst_g_s']:.3f} g/s and the fit's is "
+                f"off by {b['flow_error_at_worst_g_s']:.3f} g/s: the polynomial's error near the "
+                "border of the table (paper 003's 'border effect': the exhaust flow goes as "
+                "sqrt(1 - ((p_atm/p - b)/(1 - b))^2), with an infinite slope as p -> p_atm, which "
+                "no polynomial in p follows) acting on a small flow, divided by a "
+                f"small pressure (fitted to the same grid without noise: {clean[b['du_V']]:.2f} %, "
+                + ("a model error)." if clean[b["du_V"]] > 2 else "so the noise causes it)."))
+    return " ".join(parts) or "Approximation I stays within 2 % on every step."
+
+
+def _tangent_section(rows, reasons):
+    blocks = [rp.Table(["law", "p_e", "Cp", "Gu", "tau", "G", "against the true valve"], rows,
+                       units=["", "bar", "1e-8 kg/(s Pa)", "g/(s V)", "s", "bar/V", ""],
+                       caption="Tangent model p*/u* = G/(1 + tau s) at u_e = 0 V, 1 l tank (eq. 7-8)")]
+    blocks += [rp.Paragraph(text) for text in reasons.values()] or [
+        rp.Paragraph("Every approximation's tangent model is within 20 % of the true valve's.")]
+    return rp.Section("Tangent models", blocks)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
