@@ -28,7 +28,17 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["Reference", "steps", "profile", "validation_profile"]
+__all__ = ["Reference", "steps", "profile", "validation_profile", "sine_points",
+           "SINE_AMPLITUDE", "SINE_FREQUENCY", "SINE_STROKE"]
+
+#: The precision sine section (issue 14, after published rig results): amplitude 60 mm
+#: at 0.5 Hz on a 0.5 m stroke; the amplitude scales with the stroke, the frequency not.
+SINE_AMPLITUDE = 0.06
+SINE_FREQUENCY = 0.5
+SINE_STROKE = 0.5
+#: Break-point spacing of a sine drawn as a profile, s: the chord error A w^2 dt^2 / 8
+#: is 0.3 um for the 60 mm, 0.5 Hz sine, far below any sensor quantum.
+_SINE_DT = 2e-3
 
 
 @dataclass(frozen=True)
@@ -44,11 +54,16 @@ class Reference:
     hold : bool
         True: each value is held until the next break point (steps); False: linear
         interpolation between break points (ramps and holds).
+    sections : tuple of (name, start s, end s)
+        Named stretches judged as a whole rather than piece by piece, e.g.
+        ``("sine", 12.0, 18.0)``: a sine drawn as many short ramps is one tracking
+        section for the validation, not hundreds of ramps.
     """
 
     times: np.ndarray
     values: np.ndarray
     hold: bool = False
+    sections: tuple = ()
 
     def __call__(self, t: float | np.ndarray) -> np.ndarray:
         if self.hold:
@@ -77,9 +92,29 @@ def profile(points: Sequence[tuple[float, float]]) -> Reference:
     return Reference(times=pts[:, 0], values=pts[:, 1], hold=False)
 
 
+def sine_points(t0: float, center: float, amplitude: float, frequency: float,
+                periods: int) -> list[tuple[float, float]]:
+    """Break points (s, m) of r = center - amplitude cos(2 pi f (t - t0)) from ``t0``.
+
+    Starts and ends at rest at ``center - amplitude`` (a jump of acceleration only),
+    ``periods`` whole periods, points every 2 ms (chord error below 1 um for the
+    precision sine).
+    """
+    if not (math.isfinite(frequency) and frequency > 0):
+        raise InputError(f"sine frequency must be > 0 Hz, got {frequency!r}")
+    if int(periods) != periods or periods < 1:
+        raise InputError(f"sine periods must be a whole number >= 1, got {periods!r}")
+    dur = periods / frequency
+    n = max(int(math.ceil(dur / _SINE_DT)), 8)
+    tt = np.linspace(0.0, dur, n + 1)
+    rr = center - amplitude * np.cos(2.0 * math.pi * frequency * tt)
+    return [(t0 + float(a), float(b)) for a, b in zip(tt, rr)]
+
+
 def validation_profile(plant, large_step: float | None = None, small_step: float | None = None,
                        hold: float = 2.5, ramp_speed: float | None = None,
-                       margin: float = 0.1, start_hold: float = 0.5) -> Reference:
+                       margin: float = 0.1, start_hold: float = 0.5,
+                       sine: bool = False, sine_periods: int = 3) -> Reference:
     """The standard validation reference for a plant (piecewise linear, m).
 
     Starting at rest at mid-stroke ``c = L/2`` (``L`` the stroke):
@@ -90,8 +125,14 @@ def validation_profile(plant, large_step: float | None = None, small_step: float
     4. ramp up at ``ramp_speed`` to ``(1 - margin) L``, hold;
        ramp down to ``margin L``, hold.
 
+    5. with ``sine``: ramp to ``c - A``, hold, then ``sine_periods`` periods of
+       r = c - A cos(2 pi f t), A = 60 mm x L / 0.5 m, f = 0.5 Hz (the precision
+       section of issue 14), then hold at ``c - A``. The reference's ``sections``
+       name the sine ``("sine", start, end)``.
+
     Every level stays within [margin L, (1 - margin) L]. With the defaults on a
-    0.5 m stroke: steps of 125, 250 and 10 mm, ramps at 0.1 m/s, 22.75 s in all.
+    0.5 m stroke: steps of 125, 250 and 10 mm, ramps at 0.1 m/s, 22.75 s in all
+    (33.2 s with the sine).
 
     Parameters
     ----------
@@ -110,6 +151,10 @@ def validation_profile(plant, large_step: float | None = None, small_step: float
         Fraction of the stroke kept free at each end. Default 0.1.
     start_hold : float, s
         Initial hold at mid-stroke. Default 0.5 s.
+    sine : bool
+        Append the sine section (item 5).
+    sine_periods : int
+        Whole periods of the sine (default 3: 6 s at 0.5 Hz).
 
     Returns
     -------
@@ -152,4 +197,19 @@ def validation_profile(plant, large_step: float | None = None, small_step: float
         pts.append((t, target))
         t += hold
         pts.append((t, target))
-    return profile(pts)
+    if not sine:
+        return profile(pts)
+    amp = SINE_AMPLITUDE * L / SINE_STROKE
+    start = c - amp
+    t += abs(start - pts[-1][1]) / v
+    pts.append((t, start))
+    t += hold
+    pts.append((t, start))
+    wave = sine_points(t, c, amp, SINE_FREQUENCY, sine_periods)
+    pts.extend(wave[1:])
+    t_sine = (t, wave[-1][0])
+    t = wave[-1][0] + hold
+    pts.append((t, start))
+    ref = profile(pts)
+    return Reference(times=ref.times, values=ref.values, hold=False,
+                     sections=(("sine",) + t_sine,))
