@@ -436,7 +436,9 @@ class FeedbackLinearizing:
         T = self.sample_time
         x, v, p_a, p_b = float(y["x"]), float(y["v"]), float(y["p_a"]), float(y["p_b"])
         F = float(m.force(p_a, p_b))
-        if self.observer_bandwidth > 0 and last is not None:
+        if "d" in y:                        # an observer outside estimates the force (Observed)
+            d = float(y["d"])
+        elif self.observer_bandwidth > 0 and last is not None:
             v_prev, f_prev = last
             d_meas = (0.5 * (F + f_prev) - m.viscous * 0.5 * (v + v_prev) - m.external_force
                       - m.mass * (v - v_prev) / T)
