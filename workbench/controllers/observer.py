@@ -226,11 +226,14 @@ class Observed:
     inner : DiscreteController (its ``sample_time`` must be the observer's).
     observer : KalmanObserver.
     plant : workbench.Plant (areas, atmosphere, external force for the force).
+    preview : the reference the inner controller was designed to track, or None
+        (for reports; the inner controller holds its own copy).
     """
 
     inner: Any
     observer: KalmanObserver
     plant: Any
+    preview: Any = None
 
     needs = ("x", "p_a", "p_b")
 
