@@ -359,7 +359,7 @@ def smooth(reference: Reference, max_speed: float, max_acceleration: float,
     for tj, D in jumps:
         tf = max(1.875 * abs(D) / vmax, math.sqrt(5.7735 * abs(D) / amax),
                  (60.0 * abs(D) / jmax) ** (1.0 / 3.0))
-        sel = (tt >= tj) & (tt < tj + tf)
+        sel = slice(*np.searchsorted(tt, [tj, tj + tf]))
         s0, s1, s2, s3 = _minjerk((tt[sel] - tj) / tf)
         out[sel, 1] += D * (s0 - 1.0)
         out[sel, 2] += D * s1 / tf
@@ -368,7 +368,7 @@ def smooth(reference: Reference, max_speed: float, max_acceleration: float,
     for tc, dv in corners:
         tau = max(1.875 * abs(dv) / amax, math.sqrt(5.7735 * abs(dv) / jmax), cmin)
         lo = tc - 0.5 * tau
-        sel = (tt >= lo) & (tt < tc + 0.5 * tau)
+        sel = slice(*np.searchsorted(tt, [lo, tc + 0.5 * tau]))
         x = tt[sel] - lo
         s0, s1, s2, s3 = _minjerk(x / tau)
         # velocity dv * s(x / tau); position dv * integral of it, minus the kink

@@ -212,7 +212,7 @@ def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool):
         keep = [e for e in plant.effects if e not in STATE_EFFECTS
                 and e not in ("valve_deadband", "valve_offset")]
         return NMPC.for_plant(plant, effects=keep, sample_time=T, max_speed=2.0,
-                              jit=jit, preview=preview)
+                              horizon=nmpc_horizon(T), jit=jit, preview=preview)
     if kind == "fl":
         from .feedback_linearizing import SAMPLING_LIMIT
         lam = bandwidth if bandwidth is not None else min(25.0, 0.8 * SAMPLING_LIMIT / T)
@@ -220,18 +220,28 @@ def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool):
     return _pid(plant, T, preview, q)
 
 
+def nmpc_horizon(T: float) -> int:
+    """Shooting intervals: about 0.1 s of prediction, 20 .. 40 intervals (the solve
+    time grows with N; 40 at 2 ms solves in about 0.7 ms)."""
+    return int(min(40, max(20, round(0.1 / T))))
+
+
 def _fl(plant, lam: float, T: float, preview):
-    """FL at ``lam`` rad/s, or the largest feasible bandwidth below it."""
+    """FL at ``lam`` rad/s (or the largest feasible bandwidth below it), without the
+    law's own integral: the observer's force estimate d already removes a constant
+    unmodelled force, and on top of it the integral (gain lambda^4) turned every
+    stick into a break-away overshoot (hunting, 3 mm on the precision rig)."""
     from dataclasses import replace
     from .feedback_linearizing import feedback_linearizing
     try:
-        fl = feedback_linearizing(plant, bandwidth=lam, sample_time=T)
+        fl = feedback_linearizing(plant, bandwidth=lam, sample_time=T, integral=False)
     except InputError as exc:
         import re
         m = re.search(r"about ([0-9.]+) rad/s", str(exc))
         if not m:
             raise
-        fl = feedback_linearizing(plant, bandwidth=0.95 * float(m.group(1)), sample_time=T)
+        fl = feedback_linearizing(plant, bandwidth=0.95 * float(m.group(1)), sample_time=T,
+                                  integral=False)
     return replace(fl, preview=preview)
 
 
@@ -244,8 +254,14 @@ def _pid(plant, T: float, preview, q: float) -> VelocityPID:
     integral an order slower than the loop).
     """
     from .. import linearize
+    from .mpc import prediction_model
     prm = plant.params
-    red = linearize.reduced_position_model(linearize.tangent(plant, x=0.5 * plant.stroke))
+    # friction and deadband have no small-signal gain at rest: linearise without them
+    smooth = prediction_model(plant, effects=[e for e in plant.effects if e not in
+                                              ("dry_friction", "valve_deadband", "valve_offset",
+                                               "valve_dynamics", "heat_transfer",
+                                               "line_dynamics", "supply_droop")])
+    red = linearize.reduced_position_model(linearize.tangent(smooth, x=0.5 * plant.stroke))
     k0 = min(2.0 * red.zeta * red.w0 / 3.0, 0.2 / T)
     kp = k0 / red.kv
     tau = ((red.zeta + math.sqrt(red.zeta ** 2 - 1.0)) / red.w0 if red.zeta > 1.0
