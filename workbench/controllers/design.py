@@ -47,8 +47,8 @@ __all__ = ["design", "axis_limits", "AxisLimits", "KINDS", "VelocityPID"]
 
 KINDS = ("pid", "fl", "nmpc")
 #: m/s: speed below which a piston in the lock band is held by closing the valve
-#: (dry friction F_c/m of 10 m/s^2 stops 50 mm/s within 0.1 mm).
-LOCK_SPEED = 0.05
+#: (dry friction F_c/m of 12 m/s^2 stops 20 mm/s within 0.02 mm).
+LOCK_SPEED = 0.02
 #: Share of the valve's flow, the force range and the force rate that a planned
 #: trajectory may use; the rest is for the feedback (friction, lines, model error).
 TRAJECTORY_MARGIN = 0.3
