@@ -177,7 +177,6 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
     Observed
         With ``needs == ("x", "p_a", "p_b")``; ``.inner`` is the compensated law.
     """
-    from ..validate import Specification
     if kind not in KINDS:
         raise InputError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     prm = plant.params
@@ -186,7 +185,8 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
         raise InputError(f"sample_time must be > 0 s, got {sample_time!r}")
     q = float(quantum if quantum is not None else
               prm.get("controller.position_resolution") or plant.stroke / 4096.0)
-    spec = Specification.precision(plant, quantum=q) if spec is None else spec
+    # the precision specification's steady-state limit is one quantum
+    ss_limit = q if spec is None else float(spec.max_steady_state_error)
     preview = None
     if reference is not None:
         from ..references import smooth
@@ -197,7 +197,7 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
     dead = DeadbandInverse.from_plant(plant)         # identity without deadband and offset
     if lock is None:
         lock = bool(has & {"dry_friction", "valve_deadband"})
-    band = min(0.5 * q, 0.5 * spec.max_steady_state_error) if lock else 0.0
+    band = min(0.5 * q, 0.5 * ss_limit) if lock else 0.0
     comp = Compensated(law, deadband=dead, lock_band=band, release_band=4.0 * band,
                        lock_speed=LOCK_SPEED if lock else 0.0)
     obs = kalman_observer(plant, T, quantum=q, pressure_noise=pressure_noise)
