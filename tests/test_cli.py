@@ -145,7 +145,7 @@ def test_every_command_group_registers():
     """The top-level commands are exactly those of the command modules (none missing)."""
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     assert set(sub.choices) == {"check", "linearize", "simulate", "limits", "map", "identify",
-                                "diagnose", "robustness", "bench"}
+                                "diagnose", "robustness", "design", "bench"}
 
 
 # ---------------------------------------------------------------------- bench registry

@@ -396,3 +396,58 @@ def test_validation_figures_render(situm_p, situm, tmp_path):
     assert (tmp_path / "compare.png").stat().st_size > 20_000
     with pytest.raises(ValueError):
         compare_figure([situm_p], ["P", "PD"])
+
+
+# ---------------------------------------------------------------- precision specification
+def test_precision_profile_sine_section_is_the_issue_sine(situm):
+    ref = V.precision_profile(situm)             # 0.5 m stroke: 60 mm, 0.5 Hz, 3 periods
+    (name, a, b), = ref.sections
+    assert name == "sine" and b - a == pytest.approx(6.0, abs=1e-12)
+    t = np.linspace(a, b, 7001)
+    c, amp, w = 0.25, 0.06, 2 * math.pi * 0.5
+    # the drawn sine against the analytic one: chord error A w^2 dt^2 / 8 at 2 ms
+    assert np.max(np.abs(ref(t) - (c - amp * np.cos(w * (t - a))))) <= amp * w ** 2 * 2e-3 ** 2 / 8 * 1.01
+    # the sine's ramps are one section, not hundreds of ramp segments
+    tt = np.arange(0.0, ref.duration + 1e-12, 1e-3)
+    v = V.evaluate(synthetic(tt, ref(tt)), ref, V.Specification.precision(situm), situm)
+    assert sum(m.segment.kind == "ramp" for m in v.segments) == 3      # two ramps + the one to the sine
+    # a stroke of 0.25 m halves the amplitude, keeps the frequency
+    half = V.precision_profile(0.25)
+    (_, a2, b2), = half.sections
+    seg = half(np.linspace(a2, b2, 3001))
+    assert (seg.max() - seg.min()) == pytest.approx(0.06, abs=1e-9) and b2 - a2 == pytest.approx(6.0)
+
+
+def test_sine_error_is_the_worst_lag_error(situm):
+    # x lags the sine by tau: |r - x| peaks at 2 A sin(w tau / 2) (analytic)
+    ref = V.precision_profile(situm)
+    (_, a, b), = ref.sections
+    tau = 0.01
+    t = np.arange(0.0, ref.duration + 1e-12, 1e-3)
+    x = ref(t - np.where((t > a) & (t < b + tau), tau, 0.0))
+    v = V.evaluate(synthetic(t, x), ref, V.Specification.precision(situm), situm)
+    w = 2 * math.pi * 0.5
+    expect = 2 * 0.06 * math.sin(w * tau / 2)                 # 1.88 mm
+    # sampled at 1 ms, the peak is missed by at most A w^2 tau (0.5 ms)^2-order: 1e-6 m
+    assert v.check("sine tracking error").value == pytest.approx(expect, abs=2e-6)
+    assert not v.check("sine tracking error").passed            # > 1 mm
+    assert v.metrics.sine_error_max == v.check("sine tracking error").value
+
+
+def test_precision_spec_values_and_quantum(situm):
+    spec = V.Specification.precision(situm)
+    q = 0.5 / 4096                                              # 12 bits over 0.5 m
+    assert spec.max_steady_state_error == pytest.approx(q) and spec.band_floor == pytest.approx(q)
+    assert spec.max_overshoot == 2.0 and spec.max_sine_error == pytest.approx(1e-3)
+    assert spec.name == "precision" and spec.to_dict()["name"] == "precision"
+    assert V.Specification.precision(quantum=1e-5, stroke=1.0).max_sine_error == pytest.approx(2e-3)
+    plant = situm.with_params(**{"controller.position_resolution": 5e-5})
+    assert V.Specification.precision(plant).max_steady_state_error == pytest.approx(5e-5)
+    with pytest.raises(InputError, match="quantum"):
+        V.Specification.precision(quantum=-1.0)
+    # the default specification reports a sine but does not judge it
+    ref = V.precision_profile(situm)
+    t = np.arange(0.0, ref.duration + 1e-12, 1e-3)
+    v = V.evaluate(synthetic(t, ref(t) + 5e-3), ref, V.Specification(), situm)
+    assert v.check("sine tracking error").passed
+    assert v.check("sine tracking error").value == pytest.approx(5e-3, abs=1e-12)

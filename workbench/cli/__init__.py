@@ -32,7 +32,7 @@ __all__ = ["main", "build_parser", "CommandModuleError", "COMMAND_GROUPS"]
 
 #: Command-group modules of this package, in the order ``--help`` lists them.
 COMMAND_GROUPS = ("plant", "simulate", "stability", "identify", "diagnose", "robustness",
-                  "bench")
+                  "design", "bench")
 
 #: Exit code of a broken installation (a command module that cannot be loaded).
 EXIT_BROKEN = 1

@@ -382,6 +382,10 @@ class FeedbackLinearizing:
     reference : ReferenceModel.
     gains : {"k2", "k1", "k0", "ki"} of the error dynamics (1/s .. 1/s^4).
     design : Feasibility or None.
+    preview : the whole reference known in advance with its derivatives (a
+        :class:`~workbench.references.Trajectory`, time from the first sample), or
+        None. With it the law tracks r and its first three derivatives directly
+        (feedforward) instead of the lagging reference model.
     """
 
     model: DriveModel
@@ -393,6 +397,7 @@ class FeedbackLinearizing:
     observer_bandwidth: float = 0.0
     reference: ReferenceModel | None = None
     design: Feasibility | None = None
+    preview: Any = None
     gains: dict = field(init=False)
 
     kind = "feedback linearising"
@@ -414,49 +419,64 @@ class FeedbackLinearizing:
 
     def reset(self):
         """Controller state: (reference model state, integral, disturbance estimate,
-        last (v, F)); the reference model starts at the first sample."""
-        return (None, 0.0, 0.0, None)
+        last (v, F), time since the first sample); the reference model starts at the
+        first sample."""
+        return (None, 0.0, 0.0, None, 0.0)
 
-    def _characteristic(self, xr, z, d, r, x, v, p_a, p_b) -> tuple[float, float, float]:
-        """(G, position error, model acceleration) of the linearising law at one state."""
+    def _characteristic(self, xr, jr, z, d, x, v, p_a, p_b) -> tuple[float, float, float]:
+        """(G, position error, model acceleration) of the linearising law at one state,
+        for the reference state ``xr`` = (x_r, v_r, a_r) and jerk ``jr``."""
         m = self.model
         g = self.gains
         a = float(m.acceleration(v, p_a, p_b)) - d / m.mass
         e0, e1, e2 = xr[0] - x, xr[1] - v, xr[2] - a
-        jr = float(self.reference.jerk(xr, r))
         w = jr + g["k2"] * e2 + g["k1"] * e1 + g["k0"] * e0 + g["ki"] * z
         G = float(m.gamma_for_force_rate(m.mass * w + m.viscous * a, x, v, p_a, p_b))
         if not math.isfinite(G):
             G = math.copysign(1e9, G)
         return G, e0, a
 
+    def _target(self, xr, r: float, t: float, half: bool):
+        """Reference state (x_r, v_r, a_r) and jerk now (``half``: half a sample on):
+        from the preview trajectory, else the reference model."""
+        if self.preview is not None:
+            tt = t + (0.5 * self.sample_time if half else 0.0)
+            rr, vr, ar, jr = (float(q) for q in self.preview.derivatives(tt))
+            return np.array([rr, vr, ar]), jr
+        st = self.reference.half_step(xr, r) if half else xr
+        return st, float(self.reference.jerk(st, r))
+
     def update(self, state, r: float, y: dict) -> tuple[tuple, float]:
-        xr, z, d, last = state
+        xr, z, d, last, t = state if len(state) == 5 else (*state, 0.0)
         m = self.model
         T = self.sample_time
         x, v, p_a, p_b = float(y["x"]), float(y["v"]), float(y["p_a"]), float(y["p_b"])
         F = float(m.force(p_a, p_b))
-        if self.observer_bandwidth > 0 and last is not None:
+        if "d" in y:                        # an observer outside estimates the force (Observed)
+            d = float(y["d"])
+        elif self.observer_bandwidth > 0 and last is not None:
             v_prev, f_prev = last
             d_meas = (0.5 * (F + f_prev) - m.viscous * 0.5 * (v + v_prev) - m.external_force
                       - m.mass * (v - v_prev) / T)
             d = d + (1.0 - math.exp(-self.observer_bandwidth * T)) * (d_meas - d)
         if xr is None:                      # start the reference model where the piston is
             xr = np.array([x, v, float(m.acceleration(v, p_a, p_b)) - d / m.mass])
-        G, e0, a = self._characteristic(xr, z, d, r, x, v, p_a, p_b)
+        tgt, jr = self._target(xr, r, t, False)
+        G, e0, a = self._characteristic(tgt, jr, z, d, x, v, p_a, p_b)
         if self.midpoint:
             # evaluate the law again half a period on, at the state the model predicts
             G0 = min(max(G, -1e3), 1e3)
             h = 0.5 * T
             dpa, dpb = m.pressure_rates(x, v, p_a, p_b, G0)
-            G, _, _ = self._characteristic(self.reference.half_step(xr, r), z + h * e0, d, r,
+            tgt, jr = self._target(xr, r, t, True)
+            G, _, _ = self._characteristic(tgt, jr, z + h * e0, d,
                                            x + h * v + 0.5 * h * h * a, v + h * a,
                                            p_a + h * float(dpa), p_b + h * float(dpb))
         u, sat = m.valve.command_for_gamma(G, "a")
         z_new = z + T * e0
         if sat and np.sign(e0) == np.sign(G):      # conditional integration (anti-windup)
             z_new = z
-        return (self.reference.step(xr, r), z_new, d, (v, F)), float(u)
+        return (self.reference.step(xr, r), z_new, d, (v, F), t + T), float(u)
 
     def reference_response(self, reference, t_end: float,
                            x0: float | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -60,7 +60,9 @@ def stick_slip_acceleration(v, drive_force, mass, viscous, coulomb, static,
     slip = (drive_force - sgn_v * stribeck_level(v, coulomb, static, stribeck_velocity)
             - viscous * v) / mass
     breakaway = (drive_force - ops.sign(drive_force) * static) / mass
-    stick = -v / tau
+    # a residual speed below 1e-12 m/s is no longer decayed: decaying on through
+    # 1e-150 m/s made CVODES fail (NaN) with a closed valve (issue 14)
+    stick = ops.where(ops.fabs(v) < 1e-12, 0.0 * v, -v / tau)
     in_band = ops.fabs(v) < v_stick
     held = ops.fabs(drive_force) <= static
     return ops.where(in_band, ops.where(held, stick, breakaway), slip)

@@ -90,6 +90,12 @@ class NMPC:
     jit : bool
         Compile the linearisation to C (cached; needs a C compiler, else CasADi's
         virtual machine evaluates it).
+    preview : callable or None
+        The whole reference r(t) (s -> m, vectorised, time from the first update),
+        known in advance: the nodes then follow it (position, and velocity from its
+        chord over one sample) instead of extrapolating the current sample. It must
+        be the reference the loop runs on (e.g. a
+        :class:`~workbench.references.Trajectory`).
     """
 
     model: Any
@@ -114,9 +120,12 @@ class NMPC:
     reference_rate_limit: float = field(default=0.5, metadata=_meta("m/s", "ramp detection"))
     disturbance_gain: float = field(default=1.0, metadata=_meta("-", "force observer gain"))
     jit: bool = field(default=True, metadata=_meta("", "compile to C"))
+    preview: Any = field(default=None, metadata=_meta("", "reference known in advance"))
 
     # ------------------------------------------------------------------ checks
     def __post_init__(self) -> None:
+        if self.preview is not None and not callable(self.preview):
+            raise InputError("NMPC preview must be a reference r(t) (callable, s -> m) or None")
         _check_model(self)
         _check_limits(self)
         _check_numbers(self)

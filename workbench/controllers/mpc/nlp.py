@@ -11,7 +11,6 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .model import V_SCALE
 
 __all__ = ["IpoptSolver"]
 
@@ -20,7 +19,7 @@ class IpoptSolver:
     """IPOPT on the multiple-shooting NLP of one :class:`~.problem.Problem`.
 
     Decision vector w = (vec(X) (4 (N + 1)), U (N), slacks (ns)); parameters
-    (x0, r, rate, u_prev, d, P). Constraints: the initial state and the N defects
+    (x0, R, VR, u_prev, d, P). Constraints: the initial state and the N defects
     (equalities, first), then per soft limit the lower and upper rows at nodes 1..N.
 
     Parameters
@@ -51,23 +50,22 @@ class IpoptSolver:
         U = ca.MX.sym("U", 1, N)
         s = ca.MX.sym("s", ns)
         x0 = ca.MX.sym("x0", nx)
-        r = ca.MX.sym("r")
-        rate = ca.MX.sym("rate")
+        R = ca.MX.sym("R", 1, N + 1)
+        VR = ca.MX.sym("VR", 1, N + 1)
         up = ca.MX.sym("up")
         d = ca.MX.sym("d")
         P = ca.MX.sym("P", pb.P.size)
         wx, wv, wdu, rho1, rho2, lo, hi = pb.unpack(P)
-        R = r + rate * pb.T * ca.DM(np.arange(N + 1)).T
         Xn = pb.F.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
         ex = (X[0, 1:] - R[0, 1:]).T
-        ev = X[1, 1:].T - rate * pb.L / V_SCALE
+        ev = (X[1, 1:] - VR[0, 1:]).T
         du = ca.vertcat(U[0, 0] - up, (U[0, 1:] - U[0, :-1]).T)
         J = 0.5 * (ca.dot(wx * ex, ex) + ca.dot(wv * ev, ev) + wdu * ca.dot(du, du)) \
             + rho1 * ca.sum1(s) + 0.5 * rho2 * ca.dot(s, s)
         g = [X[:, 0] - x0, ca.vec(Xn - X[:, 1:])]
         for i, k_s in pb.soft:
             g += [X[i, 1:].T + s[k_s] - lo[i], X[i, 1:].T - s[k_s] - hi[i]]
-        return {"x": ca.vertcat(ca.vec(X), U.T, s), "p": ca.vertcat(x0, r, rate, up, d, P),
+        return {"x": ca.vertcat(ca.vec(X), U.T, s), "p": ca.vertcat(x0, R.T, VR.T, up, d, P),
                 "f": J, "g": ca.vertcat(*g)}
 
     def _bounds(self) -> None:
@@ -97,13 +95,14 @@ class IpoptSolver:
         lam_x[n_eq:n_eq + N] = np.append(lu[1:], lu[-1])
         return lam_x, lam_g
 
-    def __call__(self, X, U, shift: bool, zm, r, rate, u_prev, d, lam=None):
+    def __call__(self, X, U, shift: bool, zm, R, VR, u_prev, d, lam=None):
         """Solve from the plan (X, U), shifted by one sample if ``shift``.
 
         Parameters
         ----------
         X, U : plan (scaled), the initial guess. zm : (4,) measured state, scaled.
-        r, rate : reference now and its rate, scaled. u_prev : last command, scaled.
+        R, VR : (N + 1,) reference position and velocity at the nodes, scaled.
+        u_prev : last command, scaled.
         d : N, disturbance force. lam : (lam_x, lam_g) of the previous solve, shifted
             as the dual guess when ``shift`` (then with IPOPT's warm-start options).
 
@@ -118,7 +117,7 @@ class IpoptSolver:
             X = np.hstack([X[:, 1:], X[:, -1:]])
             U = np.append(U[1:], U[-1])
         w0 = np.concatenate([X.ravel(order="F"), U, np.zeros(pb.ns)])
-        p = np.concatenate([zm, [r, rate, u_prev, d], pb.P])
+        p = np.concatenate([zm, np.ravel(R), np.ravel(VR), [u_prev, d], pb.P])
         args = dict(x0=w0, p=p, lbx=self._lbw, ubx=self._ubw, lbg=self._lbg, ubg=self._ubg)
         solver = self._cold
         if shift and lam is not None:

@@ -24,7 +24,6 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .model import V_SCALE
 
 __all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver"]
 
@@ -42,9 +41,10 @@ def sqp_step(pb) -> ca.Function:
     Returns
     -------
     casadi.Function
-        ``wb_nmpc_step(Xp, Up, shift, x0, r, rate, up, zprev, dprev, est, P) -> (X, U,
+        ``wb_nmpc_step(Xp, Up, shift, x0, R, VR, up, zprev, dprev, est, P) -> (X, U,
         u0, viol, ok, step, d)``: the previous plan (shifted by one sample if
-        ``shift``), the measured state, the reference and its rate, the last command,
+        ``shift``), the measured state, the reference position and velocity at the
+        N + 1 nodes (scaled), the last command,
         the measured state and force estimate one sample ago (``est``: 1 to update
         it), the settings vector; the new plan, its first command, the predicted
         violations (scaled, per state), success, the largest command step, the force
@@ -60,7 +60,7 @@ def sqp_step(pb) -> ca.Function:
     sol = qp(h=o[0], g=o[1], a=o[2], lba=o[3], uba=o[4], lbx=o[5], ubx=o[6])
     res = post(o[9], o[10], o[7], o[8], sol["x"], ins[-1])
     return ca.Function("wb_nmpc_step", ins, [*res, o[11]],
-                       ["Xp", "Up", "shift", "x0", "r", "rate", "up", "zprev", "dprev",
+                       ["Xp", "Up", "shift", "x0", "R", "VR", "up", "zprev", "dprev",
                         "est", "P"],
                        ["X", "U", "u0", "viol", "ok", "step", "d"])
 
@@ -72,8 +72,8 @@ def prepare(pb) -> ca.Function:
     Up = ca.MX.sym("Up", 1, N)
     shift = ca.MX.sym("shift")
     x0 = ca.MX.sym("x0", nx)
-    r = ca.MX.sym("r")                                 # reference now, scaled
-    rate = ca.MX.sym("rate")                           # its rate, scaled per s
+    R = ca.MX.sym("R", 1, N + 1)                       # reference at the nodes, scaled
+    VR = ca.MX.sym("VR", 1, N + 1)                     # its velocity, scaled
     up = ca.MX.sym("up")
     zprev = ca.MX.sym("zprev", nx)                     # measured state one sample ago
     dprev = ca.MX.sym("dprev")                         # disturbance estimate then, N
@@ -82,12 +82,9 @@ def prepare(pb) -> ca.Function:
     d = pb.estimate(zprev, up, dprev, x0, est, P[-1])
     X = ca.if_else(shift, ca.horzcat(Xp[:, 1:], Xp[:, N]), Xp)
     U = ca.if_else(shift, ca.horzcat(Up[:, 1:], Up[:, N - 1]), Up)
-    kk = ca.DM(np.arange(N + 1)).T
-    R = r + rate * pb.T * kk
-    VR = ca.repmat(rate * pb.L / V_SCALE, 1, N + 1)
     Xn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
     out = condense(pb)(A, B, Xn - X[:, 1:], x0 - X[:, 0], X, U, R, VR, up, P)
-    return ca.Function("wb_nmpc_prep", [Xp, Up, shift, x0, r, rate, up, zprev, dprev, est, P],
+    return ca.Function("wb_nmpc_prep", [Xp, Up, shift, x0, R, VR, up, zprev, dprev, est, P],
                        [*out, X, U, d])
 
 

@@ -49,6 +49,7 @@ class NMPCState:
     d : N, estimated disturbance force (along -x, like ``load.external_force``).
     lam : (lam_x, lam_g) of the last IPOPT solve (mode "ipopt"), else None.
     info : StepInfo of the last update.
+    t : s, time of the last sample since the first update (for the preview).
     """
 
     X: Any
@@ -59,6 +60,7 @@ class NMPCState:
     d: float = 0.0
     lam: Any = None
     info: StepInfo | None = None
+    t: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -33,15 +33,36 @@ __all__ = ["advance", "solution"]
 class _Sample:
     """What the solvers need of one sample, scaled.
 
-    z : (4,) measured state. r : reference. rate : its rate, 1/s. u_prev : command
-    applied since the last sample. z_prev : (4,) measured state one sample ago.
+    z : (4,) measured state. R, VR : (1, N + 1) reference position and velocity at
+    the nodes. u_prev : command applied since the last sample. z_prev : (4,)
+    measured state one sample ago.
     """
 
     z: np.ndarray
-    r: float
-    rate: float
+    R: np.ndarray
+    VR: np.ndarray
     u_prev: float
     z_prev: np.ndarray
+
+
+def node_reference(pb, r: float, r_prev: float | None, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """Reference position (m) and velocity (m/s) at the N + 1 shooting nodes.
+
+    With the controller's ``preview`` (the whole reference r(t), s -> m) the nodes
+    take it at t + k T and its velocity from the chord over one sample centred on
+    each node (bounded by ``max_speed``); else :func:`horizon_reference` extrapolates
+    the current sample (a ramp) or holds it (a step).
+    """
+    c = pb.c
+    if c.preview is None:
+        R, rate = horizon_reference(r, r_prev, pb.T, pb.N, c.reference_rate_limit)
+        return np.asarray(R, dtype=float), np.full(pb.N + 1, rate)
+    tk = t + pb.T * np.arange(pb.N + 1)
+    R = np.asarray(c.preview(tk), dtype=float)
+    h = 0.5 * pb.T
+    VR = (np.asarray(c.preview(tk + h), dtype=float) - np.asarray(c.preview(tk - h), dtype=float)) / pb.T
+    vmax = c.max_speed if c.max_speed is not None else np.inf
+    return R, np.clip(VR, -vmax, vmax)
 
 
 def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
@@ -60,13 +81,14 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
         zm = np.array([y[k] for k in NMPC_STATES], dtype=float) / pb.sx
     except KeyError as exc:
         raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
-    _, rate = horizon_reference(r, None if state is None else state.r_prev, pb.T, 1,
-                                c.reference_rate_limit)
+    t = 0.0 if state is None else state.t + pb.T
+    R, VR = node_reference(pb, r, None if state is None else state.r_prev, t)
+    R, VR = (R / pb.L)[None, :], (VR / V_SCALE)[None, :]
     if state is None:
-        s = _Sample(zm, r / pb.L, rate / pb.L, 0.0, zm)
+        s = _Sample(zm, R, VR, 0.0, zm)
         dprev, est = 0.0, 0.0
     else:
-        s = _Sample(zm, r / pb.L, rate / pb.L, state.u_prev, state.z)
+        s = _Sample(zm, R, VR, state.u_prev, state.z)
         dprev, est = state.d, 1.0
     warm = state is not None and c.warm_start
     lam = None
@@ -79,7 +101,7 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
         X, U = _previous_plan(pb, state, zm)
     w0 = float(U[0])
     info = _step_info(pb, it, ok, viol, restarted, time.perf_counter() - t0)
-    return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info)
+    return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info, t=t)
 
 
 def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: float,
@@ -112,7 +134,7 @@ def _sqp(pb, X, U, shift: bool, s: _Sample, dprev: float, est: float, iters: int
     ok, it, viol, d = False, 0, None, dprev
     sh = 1.0 if shift else 0.0
     for it in range(1, iters + 1):
-        Xn, Un, _, viol, okk, stp, dd = pb.step(X, U, sh, s.z, s.r, s.rate, s.u_prev, s.z_prev,
+        Xn, Un, _, viol, okk, stp, dd = pb.step(X, U, sh, s.z, s.R, s.VR, s.u_prev, s.z_prev,
                                                 dprev, est, pb.P)
         ok = bool(okk)
         if it == 1:
@@ -135,7 +157,7 @@ def _ipopt_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: fl
     c = pb.c
     d = float(pb.estimate(s.z_prev, s.u_prev, dprev, s.z, est, c.disturbance_gain))
     X, U = (state.X, state.U) if warm else _cold(pb, s.z)
-    X, U, it, ok, lam = pb.ipopt(X, U, warm, s.z, s.r, s.rate, s.u_prev, d,
+    X, U, it, ok, lam = pb.ipopt(X, U, warm, s.z, s.R, s.VR, s.u_prev, d,
                                  state.lam if warm else None)
     return X, U, it, ok, d, lam
 
@@ -164,7 +186,7 @@ def _step_info(pb, it: int, ok: bool, viol, restarted: bool, solve_time: float) 
 
 def solution(pb, state: NMPCState, r: float, r_prev: float | None) -> Solution:
     """The memory of an update as a Solution in SI units."""
-    R, _ = horizon_reference(r, r_prev, pb.T, pb.N, pb.c.reference_rate_limit)
+    R, _ = node_reference(pb, r, r_prev, state.t)
     X = np.asarray(state.X)
     return Solution(time=pb.T * np.arange(pb.N + 1), states=(X * pb.sx[:, None]).T,
                     commands=pb.u_c + pb.u_s * np.asarray(state.U).ravel(),

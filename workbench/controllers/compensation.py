@@ -1,0 +1,201 @@
+"""Deadband and friction compensation that any position controller can wear.
+
+* :class:`DeadbandInverse` -- the valve's spool overlap (``valve.deadband``, fraction
+  d of the span) and null offset (``valve.null_offset``, V) inverted: a wanted
+  opening s in [-1, 1] is commanded as s' = sign(s) (d + (1 - d) |s|) about the
+  true null, so the plant's opening max(|s'| - d, 0) / (1 - d) is s again. Near
+  s = 0 the inverse is a straight line through zero over |s| < ``width`` (a
+  fraction of the deadband): a discontinuous inverse turns sensor noise into
+  full-deadband command jumps (chatter); the line keeps a residual deadband of
+  about ``width`` d instead.
+* :func:`friction_force` -- the plant file's dry friction (Coulomb F_c, static F_s,
+  Stribeck velocity v_s) as a smooth function of a velocity, for feedforward from
+  the *desired* velocity: F_c tanh(v / v_e) + (F_s - F_c) exp(-(v / v_s)^2) tanh(v /
+  v_e) with v_e = v_s / 10.
+* :class:`Compensated` -- wraps a controller: applies the deadband inverse to its
+  command and **closes the valve at a hold** once the piston has stopped within
+  half a position quantum of a stationary reference (``lock_band``), until the error
+  exceeds ``release_band``. With dry friction a closed valve keeps the chamber
+  masses and the piston stays where it stopped; integral action or a disturbance
+  observer pushing against stiction after that point is what produces hunting
+  (stick-slip limit cycles). The lock is a relay with hysteresis on the position
+  error: a limit cycle would need the piston to leave the release band while the
+  valve is closed, which only an external force larger than the static friction
+  (or leakage) can do.
+
+Describing-function argument (no limit cycle in a hold). Inside the release band the
+loop is open (valve closed): there is no feedback path, so no self-sustained
+oscillation can exist. Outside it the compensated loop is the designed linear loop
+(FL error dynamics, NMPC, PID), whose Nyquist plot stays away from -1 with the
+designed margins; the relay with hysteresis (band h = lock_band .. release_band)
+has the describing function N(A) = (4 M / (pi A)) exp(-j asin(h / A)) only for
+amplitudes A > release_band, and an oscillation of amplitude A > release_band
+would take the piston out of the band, where the loop is the linear stable one.
+:func:`hold_limit_cycle` checks the simulation for it: after settling, the position
+must stay constant and the valve closed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["DeadbandInverse", "friction_force", "Compensated", "hold_limit_cycle"]
+
+
+@dataclass(frozen=True)
+class DeadbandInverse:
+    """Inverse of the valve's deadband and null offset (module docstring).
+
+    Attributes
+    ----------
+    center : V, command_center. span : V, command_span. deadband : fraction of span.
+    offset : V, null offset (the spool is centred at center + offset).
+    u_min, u_max : V, command range. width : fraction of the deadband over which the
+        inverse is a straight line through zero (default 0.1).
+    """
+
+    center: float
+    span: float
+    deadband: float = 0.0
+    offset: float = 0.0
+    u_min: float = -math.inf
+    u_max: float = math.inf
+    width: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.deadband < 1.0):
+            raise InputError(f"deadband is a fraction of the span in [0, 1), got {self.deadband!r}")
+        if not (self.span > 0):
+            raise InputError(f"command span must be > 0 V, got {self.span!r}")
+        if not (0.0 < self.width <= 1.0):
+            raise InputError(f"width is a fraction of the deadband in (0, 1], got {self.width!r}")
+
+    @classmethod
+    def from_plant(cls, plant, width: float = 0.1) -> "DeadbandInverse":
+        prm = plant.params
+        return cls(center=float(prm["valve.command_center"]), span=float(prm["valve.command_span"]),
+                   deadband=float(prm.get("valve.deadband", 0.0) or 0.0),
+                   offset=float(prm.get("valve.null_offset", 0.0) or 0.0),
+                   u_min=float(prm["valve.command_min"]), u_max=float(prm["valve.command_max"]),
+                   width=width)
+
+    @property
+    def null(self) -> float:
+        """Command that closes the valve, V: the spool's centre, a micro-span off it.
+
+        The micro-span (1e-6 of the span, far inside any deadband, 1e-6 of full flow
+        without one) keeps the valve law off its exact zero, where the plant model's
+        stick-slip friction fails to integrate a piston whose velocity decays to a
+        denormal number (workbench.simulate on a plant with dry friction at exactly
+        the centre command).
+        """
+        return self.center + self.offset + 1e-6 * self.span
+
+    def __call__(self, u: float) -> float:
+        """Command (V) that opens the valve as ``u`` would on a valve without deadband
+        and offset."""
+        s = (float(u) - self.center) / self.span
+        d = self.deadband
+        eps = self.width * d
+        if d == 0.0:
+            s2 = s
+        elif abs(s) >= eps:
+            s2 = math.copysign(d + (1.0 - d) * min(abs(s), 1.0), s)
+        else:
+            s2 = s * (d + (1.0 - d) * eps) / eps
+        return float(min(max(self.null + self.span * s2, self.u_min), self.u_max))
+
+
+def friction_force(v, coulomb: float, static: float, stribeck_velocity: float):
+    """Smooth dry friction (N, along -x for v > 0) at velocity ``v`` (m/s), numpy."""
+    v = np.asarray(v, dtype=float)
+    ve = 0.1 * stribeck_velocity
+    sgn = np.tanh(v / ve)
+    return coulomb * sgn + (static - coulomb) * np.exp(-(v / stribeck_velocity) ** 2) * sgn
+
+
+@dataclass(frozen=True)
+class Compensated:
+    """A position controller with deadband inverse and hold lock (a DiscreteController).
+
+    Attributes
+    ----------
+    inner : DiscreteController (reads x, v, p_a, p_b; e.g. inside :class:`Observed`).
+    deadband : DeadbandInverse or None.
+    lock_band : m, |r - x_measured| at or below which a stopped piston is held with the
+        valve closed (0: never); default half a quantum (see :func:`design`).
+    release_band : m, |r - x_measured| above which it is controlled again.
+    lock_speed : m/s, |v| below which the piston counts as stopped.
+    """
+
+    inner: Any
+    deadband: DeadbandInverse | None = None
+    lock_band: float = 0.0
+    release_band: float = 0.0
+    lock_speed: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("lock_band", "release_band", "lock_speed"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise InputError(f"{name} must be >= 0, got {v!r}")
+        if self.release_band < self.lock_band:
+            raise InputError("release_band must not be below lock_band")
+
+    @property
+    def sample_time(self) -> float:
+        return float(self.inner.sample_time)
+
+    @property
+    def kind(self) -> str:
+        return getattr(self.inner, "kind", type(self.inner).__name__)
+
+    def reset(self):
+        return (self.inner.reset(), False, None)
+
+    def update(self, state, r: float, y: dict):
+        inner_state, locked, r_prev = state
+        inner_state, u = self.inner.update(inner_state, r, y)   # keeps time and estimates
+        if self.deadband is not None:
+            u = self.deadband(u)
+        if self.lock_band > 0:
+            e = abs(r - float(y.get("x_measured", y["x"])))
+            still = r_prev is not None and abs(r - r_prev) <= 1e-12
+            if locked:
+                locked = still and e <= self.release_band
+            else:
+                locked = still and e <= self.lock_band and abs(float(y["v"])) <= self.lock_speed
+            if locked:
+                u = self.deadband.null if self.deadband is not None else _centre(self.inner)
+        return (inner_state, locked, r), float(u)
+
+
+def _centre(inner) -> float:
+    c = getattr(inner, "u_center", None)
+    if c is None:
+        raise InputError("the hold lock needs the valve centre: give a DeadbandInverse")
+    return float(c)
+
+
+def hold_limit_cycle(t, x, u, start: float, end: float, quantum: float) -> dict[str, float]:
+    """Evidence of a limit cycle in a hold from ``start`` to ``end`` (s).
+
+    Returns the position's peak-to-peak (m) and the number of command changes
+    larger than a hundredth of a volt, over the hold. A hold without a limit
+    cycle has a peak-to-peak below one quantum and no command activity after the
+    piston stopped.
+    """
+    t, x, u = (np.asarray(a, dtype=float) for a in (t, x, u))
+    sel = (t >= start) & (t <= end)
+    if sel.sum() < 2:
+        raise InputError("the hold has fewer than two samples")
+    xs, us = x[sel], u[sel]
+    return {"peak_to_peak": float(xs.max() - xs.min()),
+            "command_changes": int(np.sum(np.abs(np.diff(us)) > 1e-2)),
+            "quantum": float(quantum)}

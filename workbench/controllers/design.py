@@ -1,0 +1,273 @@
+"""A ready position controller from a plant file, in one call.
+
+:func:`design` returns a :class:`~workbench.controllers.base.DiscreteController` that
+needs only ``x``, ``p_a``, ``p_b`` in its measurements (it never reads ``v``):
+
+    sensors -> Observed( Compensated( PID | FL | NMPC ) )
+
+* :class:`~.observer.Observed` with a :func:`~.observer.kalman_observer`: velocity and
+  unmodelled force from the position and the pressures;
+* :class:`~.compensation.Compensated`: the valve's deadband and null offset inverted
+  (when the plant file has them) and, when it has dry friction or a deadband, the
+  hold lock (valve closed once the piston stopped within half a quantum);
+* the position law: ``"pid"`` (PID on the estimated state, derivative on the
+  estimated velocity, zero placed on the reduced model), ``"fl"`` (feedback
+  linearisation with integral action, the observer's force estimate) or ``"nmpc"``
+  (RTI NMPC whose model keeps the plant's dry friction, smooth).
+
+Given the whole reference in advance (``reference=``), a step is turned into a
+feasible smooth trajectory (:func:`workbench.references.smooth`, limits from
+:func:`axis_limits`) and FL and NMPC track it with feedforward of its derivatives;
+without it they work on the reference sample by sample (FL through its reference
+model, NMPC extrapolating the current rate).
+
+Examples
+--------
+>>> from workbench import Plant
+>>> from workbench.controllers.design import design
+>>> plant = Plant.from_toml("designs/plants/rig25_mpye.toml")
+>>> ctrl = design(plant, kind="fl")
+>>> ctrl.needs
+('x', 'p_a', 'p_b')
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from .compensation import Compensated, DeadbandInverse
+from .observer import Observed, kalman_observer
+
+__all__ = ["design", "axis_limits", "AxisLimits", "KINDS", "VelocityPID"]
+
+KINDS = ("pid", "fl", "nmpc")
+#: m/s: speed below which a piston in the lock band is held by closing the valve
+#: (dry friction F_c/m of 12 m/s^2 stops 20 mm/s within 0.02 mm).
+LOCK_SPEED = 0.02
+#: Share of the valve's flow, the force range and the force rate that a planned
+#: trajectory may use; the rest is for the feedback (friction, lines, model error).
+TRAJECTORY_MARGIN = 0.3
+#: RHO0 kg/m^3 and T0 K of ISO 6358's standard reference atmosphere.
+_RHO0, _T0, _R = 1.185, 293.15, 287.0
+
+
+@dataclass(frozen=True)
+class AxisLimits:
+    """Speed (m/s), acceleration (m/s^2) and jerk (m/s^3) a trajectory may ask for."""
+
+    speed: float
+    acceleration: float
+    jerk: float
+
+    def to_dict(self) -> dict[str, float]:
+        return {"speed": self.speed, "acceleration": self.acceleration, "jerk": self.jerk}
+
+
+def axis_limits(plant, margin: float = TRAJECTORY_MARGIN) -> AxisLimits:
+    """Trajectory limits from the valve's flow and the pressure range (SI).
+
+    * speed: the fully open edge's choked mass flow q = C p_s rho0 sqrt(T0/T) fills
+      chamber a at the mid pressure p_m = (p_s + p_atm)/2 with q r T / p_m of
+      volume per second: v = q r T / (p_m A_a);
+    * acceleration: the full pressure difference over the piston less the static
+      friction, ((p_s - p_atm) A_a - F_s) / m;
+    * jerk: the force rate of that flow into the mid-stroke chamber (volume V_m),
+      k r T q A_a / V_m, over the mass;
+
+    each times ``margin`` (default 0.3: the rest is for the feedback).
+    """
+    prm = plant.params
+    if not (0.0 < margin <= 1.0):
+        raise InputError(f"margin is a share in (0, 1], got {margin!r}")
+    T = float(prm["gas.temperature"])
+    p_s, p_atm = float(prm["supply.pressure"]), float(prm["gas.atmospheric_pressure"])
+    A = float(plant.area_a)
+    m = float(prm["load.mass"])
+    k = float(prm["gas.polytropic_index"])
+    q = float(prm["valve.sonic_conductance"]) * p_s * _RHO0 * math.sqrt(_T0 / T)
+    p_m = 0.5 * (p_s + p_atm)
+    speed = q * _R * T / (p_m * A)
+    f_s = float(prm.get("friction.static") or prm.get("friction.coulomb") or 0.0)
+    acc = max((p_s - p_atm) * A - f_s, 0.1 * (p_s - p_atm) * A) / m
+    v_mid = A * 0.5 * plant.stroke + float(prm["cylinder.dead_volume_a"])
+    jerk = k * _R * T * q * A / v_mid / m
+    return AxisLimits(margin * speed, margin * acc, margin * jerk)
+
+
+@dataclass(frozen=True)
+class VelocityPID:
+    """PID on the estimated state: u = u_c + kp e - kd (v - r') + ki int(e) (V).
+
+    The derivative acts on the estimated velocity (observer) against the reference's
+    rate (from the preview, else the reference's difference), so neither a step nor a
+    quantised position kicks it. The integral is held while the command saturates and
+    while |e| is below ``integral_band`` (m; half a quantum: below it the sensor cannot
+    tell the error, and integrating noise into a stuck piston makes it hunt).
+    """
+
+    kp: float
+    kd: float
+    ki: float
+    sample_time: float
+    u_center: float
+    u_min: float
+    u_max: float
+    integral_band: float = 0.0
+    preview: Any = None
+
+    kind = "pid"
+
+    def reset(self):
+        return (0.0, None, 0.0)
+
+    def update(self, state, r: float, y: dict):
+        integ, r_prev, t = state
+        T = self.sample_time
+        if self.preview is not None:
+            rate = float(self.preview.derivatives(t)[1])
+        else:
+            rate = 0.0 if r_prev is None else (r - r_prev) / T
+        e = r - float(y["x"])
+        u = self.u_center + self.kp * e - self.kd * (float(y["v"]) - rate) + self.ki * integ
+        if abs(e) > self.integral_band:
+            new = integ + e * T
+            u_try = u + self.ki * e * T
+            if self.u_min < u_try < self.u_max:
+                integ, u = new, u_try
+        return (integ, r, t + T), float(u)
+
+
+def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = None,
+           reference=None, quantum: float | None = None, pressure_noise: float = 0.0,
+           bandwidth: float | None = None, jit: bool = True, lock: bool | None = None):
+    """A controller for ``plant`` that needs only x, p_a, p_b (module docstring).
+
+    Parameters
+    ----------
+    plant : workbench.Plant
+        The plant file as a user has it (effects included as identified).
+    kind : {"pid", "fl", "nmpc"}
+    spec : workbench.validate.Specification, optional
+        Default :meth:`Specification.precision` of the plant: its steady-state
+        error sets the hold lock band (half of it).
+    sample_time : float, s
+        Default the plant file's ``controller.sample_time``, else 10 ms.
+    reference : Reference, optional
+        The whole reference, known in advance: smoothed to the axis's limits and
+        tracked with feedforward. The returned controller then expects to run on it
+        from t = 0.
+    quantum : float, m
+        Position-sensor step (default the plant file's, else 12 bits over the stroke).
+    pressure_noise : float, Pa
+        Pressure sensor noise (std) for the observer.
+    bandwidth : float, rad/s
+        FL error bandwidth (default the largest feasible up to 30 rad/s x 10 ms / T).
+    jit : bool
+        Compile the NMPC to C.
+    lock : bool, optional
+        Hold lock (default: when the plant file has dry friction or a deadband).
+
+    Returns
+    -------
+    Observed
+        With ``needs == ("x", "p_a", "p_b")``; ``.inner`` is the compensated law.
+    """
+    if kind not in KINDS:
+        raise InputError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    prm = plant.params
+    T = float(sample_time if sample_time is not None else prm.get("controller.sample_time") or 0.01)
+    if not (math.isfinite(T) and T > 0):
+        raise InputError(f"sample_time must be > 0 s, got {sample_time!r}")
+    q = float(quantum if quantum is not None else
+              prm.get("controller.position_resolution") or plant.stroke / 4096.0)
+    # the precision specification's steady-state limit is one quantum
+    ss_limit = q if spec is None else float(spec.max_steady_state_error)
+    preview = None
+    if reference is not None:
+        from ..references import smooth
+        lim = axis_limits(plant)
+        preview = smooth(reference, lim.speed, lim.acceleration, lim.jerk)
+    law = _law(plant, kind, T, preview, q, bandwidth, jit)
+    has = set(plant.effects)
+    dead = DeadbandInverse.from_plant(plant)         # identity without deadband and offset
+    if lock is None:
+        lock = bool(has & {"dry_friction", "valve_deadband"})
+    band = min(0.5 * q, 0.5 * ss_limit) if lock else 0.0
+    comp = Compensated(law, deadband=dead, lock_band=band, release_band=4.0 * band,
+                       lock_speed=LOCK_SPEED if lock else 0.0)
+    obs = kalman_observer(plant, T, quantum=q, pressure_noise=pressure_noise)
+    return Observed(comp, obs, plant, preview=preview)
+
+
+def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool):
+    """The position law of :func:`design` (uncompensated, reads x, v, p_a, p_b)."""
+    prm = plant.params
+    if kind == "nmpc":
+        from .mpc import NMPC, STATE_EFFECTS
+        keep = [e for e in plant.effects if e not in STATE_EFFECTS
+                and e not in ("valve_deadband", "valve_offset")]
+        return NMPC.for_plant(plant, effects=keep, sample_time=T, max_speed=2.0,
+                              horizon=nmpc_horizon(T), jit=jit, preview=preview)
+    if kind == "fl":
+        from .feedback_linearizing import SAMPLING_LIMIT
+        lam = bandwidth if bandwidth is not None else min(25.0, 0.8 * SAMPLING_LIMIT / T)
+        return _fl(plant, lam, T, preview)
+    return _pid(plant, T, preview, q)
+
+
+def nmpc_horizon(T: float) -> int:
+    """Shooting intervals: about 0.1 s of prediction, 20 .. 40 intervals (the solve
+    time grows with N; 40 at 2 ms solves in about 0.7 ms)."""
+    return int(min(40, max(20, round(0.1 / T))))
+
+
+def _fl(plant, lam: float, T: float, preview):
+    """FL at ``lam`` rad/s (or the largest feasible bandwidth below it), without the
+    law's own integral: the observer's force estimate d already removes a constant
+    unmodelled force, and on top of it the integral (gain lambda^4) turned every
+    stick into a break-away overshoot (hunting, 3 mm on the precision rig)."""
+    from dataclasses import replace
+    from .feedback_linearizing import feedback_linearizing
+    try:
+        fl = feedback_linearizing(plant, bandwidth=lam, sample_time=T, integral=False)
+    except InputError as exc:
+        import re
+        m = re.search(r"about ([0-9.]+) rad/s", str(exc))
+        if not m:
+            raise
+        fl = feedback_linearizing(plant, bandwidth=0.95 * float(m.group(1)), sample_time=T,
+                                  integral=False)
+    return replace(fl, preview=preview)
+
+
+def _pid(plant, T: float, preview, q: float) -> VelocityPID:
+    """PID gains from the reduced linear model at mid-stroke (paper 000's structure).
+
+    Loop gain k0 = kp Kv at a third of the continuous Hurwitz limit 2 zeta w0 and
+    below 0.2 / T (the sampled loop's phase); kd puts the PD zero on the slower real
+    pole for zeta > 1, else at w0 (it damps the pole pair); ki = k0 kp / 10 (the
+    integral an order slower than the loop).
+    """
+    from .. import linearize
+    from .mpc import prediction_model
+    prm = plant.params
+    # friction and deadband have no small-signal gain at rest: linearise without them
+    smooth = prediction_model(plant, effects=[e for e in plant.effects if e not in
+                                              ("dry_friction", "valve_deadband", "valve_offset",
+                                               "valve_dynamics", "heat_transfer",
+                                               "line_dynamics", "supply_droop")])
+    red = linearize.reduced_position_model(linearize.tangent(smooth, x=0.5 * plant.stroke))
+    k0 = min(2.0 * red.zeta * red.w0 / 3.0, 0.2 / T)
+    kp = k0 / red.kv
+    tau = ((red.zeta + math.sqrt(red.zeta ** 2 - 1.0)) / red.w0 if red.zeta > 1.0
+           else 1.0 / red.w0)
+    return VelocityPID(kp=kp, kd=kp * tau, ki=0.1 * k0 * kp, sample_time=T,
+                       u_center=float(prm["valve.command_center"]),
+                       u_min=float(prm["valve.command_min"]),
+                       u_max=float(prm["valve.command_max"]),
+                       integral_band=0.5 * q, preview=preview)

@@ -1,0 +1,193 @@
+"""Design, validate and report one controller for a plant file (``workbench design``).
+
+:func:`evaluate_design` designs a controller with :func:`.design.design` (given the
+precision profile in advance), runs it on the plant file's full plant behind rig
+sensors (:class:`.sensors.RigSensors`: quantised position, noisy pressures, no
+velocity) over :func:`workbench.validate.precision_profile`, judges it by the
+precision specification, times every controller update, and collects the evidence
+that no hold limit-cycles. :meth:`DesignEvaluation.sections` turns it into report
+sections.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from .compensation import hold_limit_cycle
+from .design import axis_limits, design
+from .sensors import RigSensors
+
+__all__ = ["Timed", "DesignEvaluation", "evaluate_design", "hold_evidence"]
+
+
+class Timed:
+    """Controller proxy that records the wall time of every update (s)."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+        self.sample_time = inner.sample_time
+        self.times: list[float] = []
+
+    def reset(self):
+        self.times = []
+        return self.inner.reset()
+
+    def update(self, state, r, y):
+        t0 = time.perf_counter()
+        out = self.inner.update(state, r, y)
+        self.times.append(time.perf_counter() - t0)
+        return out
+
+
+def hold_evidence(validation, quantum: float) -> list[dict[str, Any]]:
+    """Per hold (steps and holds of the profile), over its second half (at least its
+    last 0.5 s): the position's peak-to-peak (m) and the command changes > 10 mV. A
+    limit cycle persists to the end of the hold and shows as both; a late settling
+    does not. Each with its steady-state error (m)."""
+    tr = validation.trajectory
+    out = []
+    for m in validation.segments:
+        s = m.segment
+        if s.kind not in ("step", "hold") or s.duration <= 0 or math.isnan(m.steady_state_error):
+            continue
+        a = s.end - min(s.duration, max(0.5, 0.5 * s.duration))
+        try:
+            ev = hold_limit_cycle(tr.time, tr["x"], tr["u"], a, s.end, quantum)
+        except InputError:
+            continue
+        ev.update(segment=s.describe(), steady_state_error=m.steady_state_error, start=a,
+                  end=s.end)
+        out.append(ev)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class DesignEvaluation:
+    """Result of :func:`evaluate_design`.
+
+    Attributes
+    ----------
+    kind : str. controller : the designed controller. validation : Validation.
+    update_times : (n,) s per controller update. holds : :func:`hold_evidence`.
+    quantum : m. pressure_noise : Pa. limits : AxisLimits.
+    """
+
+    kind: str
+    controller: Any
+    validation: Any
+    update_times: np.ndarray
+    holds: list
+    quantum: float
+    pressure_noise: float
+    limits: Any
+
+    @property
+    def median_update_ms(self) -> float:
+        return float(np.median(self.update_times) * 1e3) if len(self.update_times) else math.nan
+
+    @property
+    def limit_cycle_free(self) -> bool:
+        """Every hold: over its second half, peak-to-peak within one quantum and no
+        command activity."""
+        return all(h["peak_to_peak"] <= h["quantum"] + 1e-12 and h["command_changes"] == 0
+                   for h in self.holds)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "validation": self.validation.to_dict(),
+                "update_time_median_ms": self.median_update_ms,
+                "update_time_p99_ms": float(np.percentile(self.update_times, 99) * 1e3)
+                if len(self.update_times) else None,
+                "holds": self.holds, "quantum": self.quantum,
+                "pressure_noise": self.pressure_noise, "limits": self.limits.to_dict(),
+                "needs": list(self.controller.needs),
+                "observer": self.controller.observer.to_dict()}
+
+    def summary(self) -> str:
+        lines = [self.validation.summary(),
+                 f"  per-sample computation: median {self.median_update_ms:.3f} ms",
+                 f"  holds without limit cycle: {'yes' if self.limit_cycle_free else 'NO'}"]
+        return "\n".join(lines)
+
+    def sections(self, title: str | None = None) -> list:
+        """Report sections: controller, validation table and figure, holds, timing."""
+        from .. import plots
+        from .. import report as rp
+        v, c = self.validation, self.controller
+        comp = c.inner
+        name = title or self.kind.upper()
+        kv = [("law", str(getattr(comp.inner, "kind", self.kind))),
+              ("sample time", c.sample_time * 1e3, "ms"),
+              ("measurements read", ", ".join(c.needs)),
+              ("observer", c.observer.summary()),
+              ("deadband inverse", f"deadband {comp.deadband.deadband:g} of the span, null "
+                                   f"offset {comp.deadband.offset:g} V"),
+              ("hold lock", f"valve closed within {comp.lock_band * 1e3:.3f} mm at under "
+                            f"{comp.lock_speed * 1e3:g} mm/s, released beyond "
+                            f"{comp.release_band * 1e3:.3f} mm" if comp.lock_band else "off"),
+              ("trajectory limits", f"{self.limits.speed:.3g} m/s, {self.limits.acceleration:.3g} "
+                                    f"m/s^2, {self.limits.jerk:.4g} m/s^3"),
+              ("sensors", f"position quantum {self.quantum * 1e3:.4f} mm, pressure noise "
+                          f"{self.pressure_noise:g} Pa (std), no velocity"),
+              ("per-sample computation", f"median {self.median_update_ms:.3f} ms, 99 % "
+                                         f"{np.percentile(self.update_times, 99) * 1e3:.3f} ms")]
+        rows = [[r[0], r[2], r[3], r[1], r[4] == "pass"] for r in v.table()]
+        hold_rows = [[h["segment"], round(h["steady_state_error"] * 1e3, 4),
+                      round(h["peak_to_peak"] * 1e3, 4),
+                      h["command_changes"]] for h in self.holds]
+        return [
+            rp.Section(f"{name}: controller", [rp.KeyValues(kv)]),
+            rp.Section(f"{name}: precision validation", [
+                rp.Table(["check", "limit", "unit", "value", "pass"], rows,
+                         caption=f"{name} on the full plant, precision specification"),
+                rp.Figure(plots.validation_figure(v, title=f"{name} on the full plant"),
+                          "Reference and position, command, chamber pressures"),
+                rp.Table(["hold", "steady-state error", "peak-to-peak, 2nd half",
+                          "command changes"], hold_rows, units=["", "mm", "mm", ""],
+                         caption="Holds: a limit cycle shows as a peak-to-peak above one "
+                                 f"quantum ({self.quantum * 1e3:.3f} mm) with command activity"),
+            ]),
+        ]
+
+
+def evaluate_design(plant, kind: str, *, reference=None, spec=None, position_bits: int = 12,
+                    pressure_noise: float = 300.0, jit: bool = True, seed: int = 0,
+                    rig=None, progress: bool | None = False) -> DesignEvaluation:
+    """Design ``kind`` for ``plant`` and validate it on ``rig`` (default the plant itself).
+
+    Parameters
+    ----------
+    plant : workbench.Plant
+        The plant file the design uses.
+    kind : {"pid", "fl", "nmpc"}
+    reference : Reference, optional
+        Default :func:`workbench.validate.precision_profile` of the plant.
+    spec : Specification, optional
+        Default :meth:`Specification.precision` with the sensor's quantum.
+    position_bits : int
+        Position ADC over the stroke (quantum = stroke / 2^bits).
+    pressure_noise : float, Pa
+        Std of each pressure sensor's white noise.
+    rig : workbench.Plant, optional
+        The plant the controller runs on (e.g. perturbed); default ``plant``.
+    """
+    from .. import validate
+    ref = validate.precision_profile(plant) if reference is None else reference
+    q = plant.stroke / 2 ** position_bits
+    spec = validate.Specification.precision(plant, quantum=q) if spec is None else spec
+    ctrl = design(plant, kind, spec=spec, reference=ref, quantum=q,
+                  pressure_noise=pressure_noise, jit=jit)
+    timed = Timed(ctrl)
+    sensed = RigSensors(timed, stroke=plant.stroke, position_bits=position_bits,
+                        pressure_noise=pressure_noise, seed=seed)
+    rig = plant if rig is None else rig
+    v = validate.validate(rig, sensed, spec=spec, reference=ref, progress=progress,
+                          label=f"{kind.upper()} (observer, compensation)")
+    return DesignEvaluation(kind=kind, controller=ctrl, validation=v,
+                            update_times=np.asarray(timed.times), holds=hold_evidence(v, q),
+                            quantum=q, pressure_noise=pressure_noise, limits=axis_limits(plant))
