@@ -255,3 +255,18 @@ def test_library_blocks_leave_sigterm_and_custom_handlers_alone():
         assert signal.getsignal(signal.SIGTERM) is term
     finally:
         signal.signal(signal.SIGINT, old)
+
+
+def test_a_run_that_cannot_fit_in_memory_is_refused_before_allocating():
+    # issue 15: `[controller] sample_time = 1e-9` made simulate allocate 23 GB until the
+    # OOM killer stopped it; on 8c8e7dd this raised numpy's MemoryError (or swapped)
+    import types
+    from workbench import Plant, simulate
+    plant = Plant.from_toml(PLANT)
+    ctrl = types.SimpleNamespace(sample_time=1e-9)           # never sampled: refused first
+    with pytest.raises(InputError, match=r"2\.4e\+10 control samples.*sample_time \(s, not ms\)"):
+        simulate.closed_loop(plant, ctrl, simulate.steps([0.2, 0.3], hold=12.0))
+    for bad in (0.0, float("nan"), -0.01):
+        with pytest.raises(InputError, match="sample time must be a finite number > 0"):
+            simulate.closed_loop(plant, types.SimpleNamespace(sample_time=bad),
+                                 simulate.steps([0.2], hold=1.0))

@@ -293,7 +293,9 @@ def closed_loop(plant: Plant, controller, reference: Callable[[float], float] | 
     Trajectory at ``output_times`` with the command applied and the reference.
     """
     T = float(controller.sample_time)
-    grid = _grid(T, _duration(reference, t_end), output_times)
+    duration = _duration(reference, t_end)
+    _check_memory(T, duration, output_times, len(plant.states))
+    grid = _grid(T, duration, output_times)
     if x0 is None:
         x0 = float(np.clip(reference(grid.out_t[0]), 0.0, plant.stroke))
     sim = Simulator(plant, rtol, atol, params)
@@ -318,6 +320,51 @@ def _duration(reference, t_end: float | None) -> float:
         if t_end is None:
             raise InputError("give t_end for a reference without a duration")
     return t_end
+
+
+def _available_memory() -> float | None:
+    """Bytes of memory available to a new allocation (Linux MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _check_memory(T: float, duration: float, output_times, nx: int) -> None:
+    """Refuse a closed-loop run whose sample grid cannot fit in memory.
+
+    Every control sample (every ``T`` over the run) and output time is an event with a
+    state (``nx`` floats), a command, a reference and ~8 float/int/bool grid entries of
+    bookkeeping; a run needing more than the memory available would be stopped by the
+    OOM killer after minutes of swapping (issue 15: ``sample_time = 1e-9`` asked for
+    23 GB), so it is an error naming the cause instead.
+    """
+    if not (np.isfinite(T) and T > 0):
+        raise InputError(f"the controller's sample time must be a finite number > 0 s, "
+                         f"got {T:g}")
+    if not np.isfinite(duration) or duration < 0:
+        raise InputError(f"the run's duration must be a finite number >= 0 s, got "
+                         f"{duration:g}")
+    span = duration
+    if output_times is not None and len(output_times):
+        span = float(np.max(output_times) - np.min(output_times))
+    n_events = span / T + 1 + (0 if output_times is None else len(output_times))
+    need = n_events * 8.0 * (nx + 10)
+    avail = _available_memory()
+    if avail is not None and need > 0.5 * avail:
+        raise InputError(
+            f"a closed-loop run over {span:g} s at a sample time of {T:g} s has "
+            f"{n_events:.3g} control samples and needs ~{need / 1e9:.3g} GB, more than half "
+            f"the {avail / 1e9:.3g} GB of memory available: check the controller's "
+            f"sample_time (s, not ms) and the run's duration (a time column in ms? a gap "
+            f"in t?)")
 
 
 @dataclass(frozen=True)
