@@ -496,7 +496,10 @@ def _check_value(key: Key, raw: Any, source: str) -> Any:
             raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
         val: Any = int(raw)
     else:
-        val = float(raw)
+        try:
+            val = float(raw)
+        except OverflowError:  # an integer beyond the float range
+            val = math.inf
     if not math.isfinite(val):
         raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
     bad = False
@@ -523,7 +526,10 @@ def _check_array(key: Key, raw: Any, source: str, loc: str) -> tuple[float, ...]
             raise InputError(f"expected {key.expected()}, got {item!r} "
                              f"({type(item).__name__}) at index {i}", source=source,
                              location=loc)
-        val = float(item)
+        try:
+            val = float(item)
+        except OverflowError:  # an integer beyond the float range
+            val = math.inf
         if not math.isfinite(val):
             raise InputError(f"expected {key.expected()}, got {item!r} at index {i}",
                              source=source, location=loc)

@@ -9,6 +9,7 @@ result against the contract of ``formats.md`` section 3 and builds the
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import re
@@ -145,7 +146,8 @@ def read_csv(path: Path) -> Parsed:
         with open(path, encoding="utf-8-sig") as fh:
             metadata, meta_lines, header, header_line = _read_preamble(fh, src)
             columns, sep = _parse_header(header, header_line, src)
-            arrays = _fast_parse(fh, len(columns), sep)
+            trailing = 1 if sep and header.rstrip().endswith(sep) else 0
+            arrays = _fast_parse(fh, len(columns), sep, trailing)
         where = CsvWhere(path, header_line, meta_lines)
         if isinstance(arrays, tuple):
             # pandas pointed at one bad row: check only that line, which raises ...
@@ -239,7 +241,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _fast_parse(fh: Any, ncols: int, sep: str | None
+def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0
                 ) -> list[np.ndarray] | tuple[str, int] | None:
     """Parse the data rows with pandas' C reader.
 
@@ -248,12 +250,24 @@ def _fast_parse(fh: Any, ncols: int, sep: str | None
     few cells); or ``("line", k)`` when pandas stopped at the k-th line after the header
     (too many cells); or None if pandas failed otherwise or found the wrong number of
     columns. The caller checks the suspect row with the slow parser, which reports it.
+    pandas takes the number of fields from the first row: a first row with more
+    fields than the header (plus ``trailing`` empty fields after a trailing delimiter)
+    is reported before pandas builds a frame of that width.
     """
     import warnings
 
     import pandas as pd
     from pandas.api import types
 
+    start = fh.tell()
+    for k in itertools.count(1):
+        raw = fh.readline()
+        text = _strip_comment(raw)
+        if raw == "" or text:
+            break
+    if text and len(text.split(sep) if sep else text.split()) > ncols + trailing:
+        return ("line", k)
+    fh.seek(start)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", pd.errors.DtypeWarning)  # mixed: text cells
@@ -267,7 +281,7 @@ def _fast_parse(fh: Any, ncols: int, sep: str | None
         return ("line", int(match.group(1))) if match else None
     except Exception:  # malformed somewhere: the slow path finds and reports where
         return None
-    if frame.shape[1] > ncols and frame.iloc[:, ncols:].isna().all(axis=None):
+    if frame.shape[1] == ncols + trailing > ncols and frame.iloc[:, ncols:].isna().all(axis=None):
         frame = frame.iloc[:, :ncols]  # trailing delimiters: empty cells after the last
     if frame.shape[1] != ncols or frame.shape[0] < 1:
         return None

@@ -225,8 +225,14 @@ def load_valve_table(path: str | os.PathLike) -> ValveTable:
     """
     path = Path(path)
     src = str(path)
+    if path.exists() and not path.is_file():  # a directory, FIFO (would block), device
+        raise InputError("is not a regular file; a valve table is a CSV text file",
+                         source=src)
     try:
         text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text (undecodable byte at offset {exc.start}); a "
+                         "valve table is a CSV text file", source=src) from None
     except FileNotFoundError:
         raise InputError("file not found", source=src) from None
     except OSError as exc:
