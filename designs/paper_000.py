@@ -1,24 +1,28 @@
 """Paper 000 (Situm, Novakovic, Petric) end to end: calibrate the rig, rerun Table I.
 
-The rig model's uncertain values are estimated from what the paper reports, with the
-workbench's grey-box estimator (:func:`workbench.identify.grey_box.estimate`: least
-squares on the nonlinear model, exact sensitivities, intervals from the covariance):
+The rig model's uncertain values are estimated from what the paper reports:
 
-* Fig. 6 / eq. (5): a 1 V open-loop step of the valve gives a piston velocity of about
-  Kv x 1 V = 0.7 m/s, with the shape of the paper's own linear model (Table II w0, zeta);
-* Table I: the closed P loop (K0 = 7, T = 10 ms) answers an APRBS reference like the
-  identified ARX [4 1 1] model;
-* Table II: supply pressure 5e5 Pa, convention not stated: both readings (absolute, or
-  gauge = 6.01e5 Pa absolute) are fitted and the one with the smaller cost is kept.
+* valve size: the grey-box estimator (:func:`workbench.identify.grey_box.estimate`:
+  least squares on the nonlinear model, exact sensitivities, 95 % interval from the
+  covariance) fits the sonic conductance to Fig. 6 -- a 1 V open-loop step giving
+  Kv x 1 V = 0.7 m/s (eq. 5), with the shape of the paper's own model (Table II);
+* supply convention: Table II's 5e5 Pa is read as absolute and as gauge; the paper's
+  experiment runs on both calibrated rigs and the reading whose re-identified ARX is
+  closer to Table I is kept;
+* deadband: from Table I's closed-loop DC gain (0.984, the P loop's steady-state error)
+  by bisection on the simulated experiment with Fig. 6 held, interval from the
+  table's rounding.
 
-Estimated: the valve's sonic conductance and its spool overlap (deadband; the paper
-names deadband and static friction as the causes of the P loop's steady-state error).
-The paper's experiment is then run on the calibrated rig (P loop, kp = 10 V/m so that
-K0 = 7 1/s, T = 10 ms, Table II's 12-bit converters), written to
-``DIR/table1_experiment.csv`` (t, r, u, x) and identified as ARX [4 1 1] with the
-workbench's ARX code (the same as ``workbench identify arx DIR/table1_experiment.csv
---input r --output x --orders 4 1 2``). The report's first table is the paper's results
-beside the workbench's; ``DIR/summary.json`` holds the same rows in ``paper_results``.
+Then the paper's experiment runs on the calibrated rig (P loop, kp = 10 V/m so that
+K0 = 7 1/s, T = 10 ms, Table II's 12-bit converters, APRBS reference over the stroke),
+is written to ``DIR/table1_experiment.csv`` (t, r, u, x) and identified as ARX [4 1 1]
+with the workbench's ARX code (the same as ``workbench identify arx
+DIR/table1_experiment.csv --input r --output x --orders 4 1 2``). The report's first
+table is the paper's results beside the workbench's, then the calibration, the
+experiment, Fig. 7's P loop and a section on each disagreement with its measured
+cause; ``DIR/summary.json`` holds the rows in ``paper_results``; the calibrated plant
+is written to ``DIR/situm_rodless.calibrated.toml`` (a full run's copy, with comments:
+``designs/plants/papers/situm_rodless_calibrated.toml``).
 
 Usage: python designs/paper_000.py [--quick] [--out DIR]
 """
@@ -109,15 +113,6 @@ def table1_response(r: np.ndarray) -> np.ndarray:
     for k in range(4, len(r)):
         y[k] = -a[1:] @ y[k - 4:k][::-1] + TABLE1_B * r[k - 2]
     return y
-
-
-def p_command(plant: Plant, setup: dict, r: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The paper's P law on measured positions: quantised, clipped command, V."""
-    prm = plant.params
-    xq = np.round(x / setup["x_step"]) * setup["x_step"]
-    u = prm["valve.command_center"] + setup["kp"] * (r - xq)
-    u = np.round(u / setup["u_step"]) * setup["u_step"]
-    return np.clip(u, prm["valve.command_min"], prm["valve.command_max"])
 
 
 def fig6_record(plant: Plant) -> Recording:
