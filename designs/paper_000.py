@@ -43,6 +43,8 @@ from workbench.identify.arx import fit_arx
 from workbench.identify.arx import validate as arx_validate
 from workbench.identify.excitation import aprbs, as_reference
 from workbench.identify.grey_box import estimate
+from workbench.errors import InputError
+from workbench.output import check_output_dir
 from workbench.params import atomic_write_text, json_safe
 from workbench.recording import Recording
 
@@ -459,7 +461,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "reports" / "paper_000"),
                     help="output folder (default reports/paper_000)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
+    try:
+        out = check_output_dir(args.out)          # a bad --out is refused before any work
+    except InputError as exc:
+        ap.error(str(exc))
     t_start = time.perf_counter()
     return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 

@@ -35,6 +35,8 @@ import numpy as np
 from workbench import Plant, controllers, linearize, plots, references, simulate, stability
 from workbench import report as rp
 from workbench import validate
+from workbench.errors import InputError
+from workbench.output import check_output_dir
 from workbench.params import atomic_write_text, json_safe
 
 HERE = Path(__file__).resolve().parent
@@ -226,7 +228,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "reports" / "paper_001"),
                     help="output folder (default reports/paper_001)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
+    try:
+        out = check_output_dir(args.out)          # a bad --out is refused before any work
+    except InputError as exc:
+        ap.error(str(exc))
     t_start = time.perf_counter()
     return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 

@@ -7,6 +7,7 @@ the paper (Table I, Table II, Sec. III) independently of the script's constants.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import re
 
 import numpy as np
@@ -191,3 +192,15 @@ def test_report_first_table_is_the_papers(run):
     cal = (out / "situm_rodless.calibrated.toml").read_text()
     assert "sonic_conductance" in cal
     assert json.loads((out / "summary.json").read_text())["quick"] is True
+
+
+def test_bad_out_is_refused_before_any_work(tmp_path, capsys):
+    import runpy
+    afile = tmp_path / "a_file"
+    afile.write_text("not a folder")
+    mod = runpy.run_path(str(Path(__file__).resolve().parents[1] / "designs" / "paper_000.py"),
+                         run_name="design")
+    with pytest.raises(SystemExit) as exc:
+        mod["main"](["--quick", "--out", str(afile)])
+    assert exc.value.code == 2
+    assert "not a folder" in capsys.readouterr().err

@@ -120,3 +120,15 @@ def test_report_first_table_is_the_papers(run):
     for head in ("paper", "workbench", "how obtained", "agrees?"):
         assert head in first
     assert (out / "report.pdf").stat().st_size > 10_000
+
+
+def test_bad_out_is_refused_before_any_work(tmp_path, capsys):
+    import runpy
+    afile = tmp_path / "a_file"
+    afile.write_text("not a folder")
+    mod = runpy.run_path(str(Path(__file__).resolve().parents[1] / "designs" / "paper_001.py"),
+                         run_name="design")
+    with pytest.raises(SystemExit) as exc:
+        mod["main"](["--quick", "--out", str(afile)])
+    assert exc.value.code == 2
+    assert "not a folder" in capsys.readouterr().err
