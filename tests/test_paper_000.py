@@ -204,3 +204,20 @@ def test_bad_out_is_refused_before_any_work(tmp_path, capsys):
         mod["main"](["--quick", "--out", str(afile)])
     assert exc.value.code == 2
     assert "not a folder" in capsys.readouterr().err
+
+
+def test_committed_calibrated_plant_is_what_the_script_finds(run):
+    """designs/plants/papers/situm_rodless_calibrated.toml was written by a full run; the
+    quick run's calibration must agree with it: the same supply reading, the deadband
+    inside the quick run's 95 % interval, the conductance within 3 % (the quick
+    bisection's resolution of 0.011 in the deadband moves it by up to ~3 %)."""
+    import tomllib
+    s = run[1]
+    path = Path(__file__).resolve().parents[1] / "designs" / "plants" / "papers" / \
+        "situm_rodless_calibrated.toml"
+    cal = tomllib.loads(path.read_text())
+    assert cal["supply"]["pressure"] == pytest.approx(_rows(s)["supply pressure"]["workbench"])
+    lo, hi = s["calibration"]["deadband_ci95"]
+    assert lo <= cal["valve"]["deadband"] <= hi
+    assert cal["valve"]["sonic_conductance"] == pytest.approx(
+        s["calibration"]["sonic_conductance_with_deadband"], rel=0.03)
