@@ -353,8 +353,8 @@ def _pid_section(pid, info, vals, vals_i, tries) -> rp.Section:
 
 
 def _transient_section(td, bores, pls) -> rp.Section:
-    rows = [[i + 1, a, b, b - a, c, d, d - c] for i, (a, b, c, d) in enumerate(
-        zip(td["half_1m"], td["half_10m"], td["settle_1m"], td["settle_10m"]))]
+    rows = [[i + 1] + [f"{v:.3f}" for v in (a, b, b - a, c, d, d - c)] for i, (a, b, c, d)
+            in enumerate(zip(td["half_1m"], td["half_10m"], td["settle_1m"], td["settle_10m"]))]
     prm = pls[1.0].params
     return rp.Section("Position transients: 1 m against 10 m (Fig. 5)", [
         rp.Paragraph(
@@ -369,8 +369,9 @@ def _transient_section(td, bores, pls) -> rp.Section:
                  caption="Transient of each setpoint step"),
         rp.Table(["tube bore", "pressure delay 10 m - 1 m", "transient shift",
                   "settling difference", "PID validated on both"],
-                 [[b["diameter"] * 1e3, b["delay"] * 1e3, b["shift"], b["settling"], b["passed"]]
-                  for b in bores], units=["mm", "ms", "s", "s", ""],
+                 [[f"{b['diameter'] * 1e3:g}", f"{b['delay'] * 1e3:.1f}", f"{b['shift']:.3f}",
+                   f"{b['settling']:.3f}", b["passed"]] for b in bores],
+                 units=["mm", "ms", "s", "s", ""],
                  caption=f"The same PID with other tube bores (the plant file's: "
                          f"{prm['lines.diameter'] * 1e3:g} mm); the paper gives none"),
     ])
