@@ -81,8 +81,8 @@ TABLE1_B_STD = 0.0011
 R_RANGE = (0.025, 0.475)
 #: Parameters estimated from the paper's measurements.
 CAL_PARAMS = ("valve.sonic_conductance",)
-#: APRBS holds, samples (the paper does not give them; Fig. 2 shows levels held for
-#: roughly 0.1 .. 0.6 s).
+#: APRBS holds, samples: ASSUMED 0.1 .. 0.6 s (the paper does not give them; with these
+#: a 400-sample half holds about a dozen levels).
 HOLD = (10, 60)
 #: A "large" steady-state error (Fig. 7, qualitative): larger than 1 % of Fig. 7's
 #: 400 mm axis, i.e. visible on the printed figure.
@@ -95,9 +95,10 @@ DEADBAND_BRACKET = (0.02, 0.2)
 #: sampling of its own), its velocity known to the paper's one digit: 0.7 +- 0.05 m/s,
 #: a uniform rounding error of std 0.05 / sqrt(3).
 FIG6_DT = 5e-3
-#: Start position of the 1 V steps (Fig. 6 record and the rig's step), m.
-X_STEP = 0.02
 FIG6_V_STD = 0.05 / np.sqrt(3.0)
+#: Start position of the 1 V steps (Fig. 6 record and the rig's step), m: ASSUMED (the
+#: paper does not say); near one end so that 0.3 s at up to 1.5 m/s fit the stroke.
+X_STEP = 0.02
 
 
 def paper_setup(plant: Plant) -> dict:
