@@ -221,3 +221,18 @@ def test_committed_calibrated_plant_is_what_the_script_finds(run):
     assert lo <= cal["valve"]["deadband"] <= hi
     assert cal["valve"]["sonic_conductance"] == pytest.approx(
         s["calibration"]["sonic_conductance_with_deadband"], rel=0.03)
+
+
+def test_table1_needs_a_stiffer_faster_loop(run):
+    """The report's third cause, checked independently with python-control: the ZOH
+    loop Kv/(s(s^2/w0^2 + 2 zeta s/w0 + 1)) with the reported w0 and K0 (zeta = 1.1,
+    T = 10 ms) has a pole within 0.01 of Table I's dominant pair (the quick grid's
+    steps of 10 rad/s and 1 1/s resolve that much)."""
+    import control
+    eq = run[1]["table1_equivalent"]
+    w0, k0 = eq["w0"], eq["k0"]
+    g = control.c2d(control.tf([k0], [1 / w0 ** 2, 2 * 1.1 / w0, 1.0, 0.0]), 0.01, "zoh")
+    poles = control.poles(control.feedback(g, 1))
+    target = complex(0.861, 0.109)
+    assert np.min(np.abs(poles - target)) < 0.01
+    assert w0 > 1.5 * 32.97 and k0 > 7.0
