@@ -35,6 +35,8 @@ import numpy as np
 from workbench import Plant, controllers, linearize, plots, references, simulate, stability
 from workbench import report as rp
 from workbench import validate
+from workbench.errors import InputError
+from workbench.output import check_output_dir
 from workbench.params import atomic_write_text, json_safe
 
 HERE = Path(__file__).resolve().parent
@@ -91,8 +93,10 @@ def plants(quick: bool, diameter: float | None = None) -> dict[float, Plant]:
 def line_step(plant: Plant) -> dict:
     """Valve step 5 -> 8 V at t = 10 ms, piston at rest at mid-stroke, 0.1 ms samples.
 
-    Returns t (s), p_a, p_b (Pa), the delay (s) until p_a has risen DELAY_THRESHOLD,
-    and the peak rate of rise of p_a (Pa/s) as the attenuation measure.
+    Returns t (s), p_a, p_b (Pa), the mass flows into chamber a and out of chamber b
+    at the line ends (kg/s), the delay (s) until p_a has risen DELAY_THRESHOLD, the
+    peak rate of rise of p_a (Pa/s) and the peak flow into chamber a (kg/s): eq. (4)
+    attenuates the mass flow.
     """
     t = np.arange(0.0, 0.12 + 1e-12, 1e-4)
     u = np.where(t >= 0.01, 8.0, 5.0)
@@ -100,8 +104,12 @@ def line_step(plant: Plant) -> dict:
     p_a, p_b = np.asarray(tr["p_a"]), np.asarray(tr["p_b"])
     k = int(np.argmax(p_a - p_a[0] > DELAY_THRESHOLD))
     rate = np.gradient(p_a, t)
-    return {"t": t, "p_a": p_a, "p_b": p_b, "delay": float(t[k] - 0.01),
-            "peak_rate": float(rate.max()), "x": np.asarray(tr["x"])}
+    last = plant.segments - 1                     # the segment that ends in the chamber
+    q_a = np.asarray(tr[f"line_a_q{last}"])       # kg/s into chamber a
+    q_b = -np.asarray(tr[f"line_b_q{last}"])      # kg/s out of chamber b
+    return {"t": t, "p_a": p_a, "p_b": p_b, "q_a": q_a, "q_b": q_b,
+            "delay": float(t[k] - 0.01), "peak_rate": float(rate.max()),
+            "peak_flow": float(q_a.max()), "x": np.asarray(tr["x"])}
 
 
 def design_pid(plant10: Plant) -> tuple[controllers.PID, controllers.PID, dict]:
@@ -203,18 +211,21 @@ def bore_sensitivity(pid, ref, spec, bores, quick: bool) -> list[dict]:
 # ---------------------------------------------------------------------- figures
 def fig_lines(steps: dict):
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(2, 1, figsize=(7.0, 4.6), sharex=True)
+    fig, axes = plt.subplots(3, 1, figsize=(7.0, 6.4), sharex=True)
     for L, st in steps.items():
         ls = "-" if L < 5 else "--"
         axes[0].plot(st["t"] * 1e3, st["p_a"] * 1e-5, ls, label=f"{L:g} m")
         axes[1].plot(st["t"] * 1e3, st["p_b"] * 1e-5, ls, label=f"{L:g} m")
+        axes[2].plot(st["t"] * 1e3, st["q_a"] * 1e3, ls, label=f"into a, {L:g} m")
+        axes[2].plot(st["t"] * 1e3, st["q_b"] * 1e3, ls, lw=0.8, label=f"out of b, {L:g} m")
     axes[0].set_ylabel("chamber a [bar abs]")
     axes[1].set_ylabel("chamber b [bar abs]")
-    axes[1].set_xlabel("time [ms] (valve step 5 -> 8 V at 10 ms)")
+    axes[2].set_ylabel("mass flow [g/s]")
+    axes[2].set_xlabel("time [ms] (valve step 5 -> 8 V at 10 ms)")
     for a in axes:
         a.axvline(10.0, color="grey", lw=0.6)
         a.grid(alpha=0.3)
-        a.legend(fontsize=8)
+        a.legend(fontsize=7, ncol=2)
     return fig
 
 
@@ -226,7 +237,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "reports" / "paper_001"),
                     help="output folder (default reports/paper_001)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
+    try:
+        out = check_output_dir(args.out)          # a bad --out is refused before any work
+    except InputError as exc:
+        ap.error(str(exc))
     t_start = time.perf_counter()
     return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 
@@ -291,20 +305,24 @@ def _config_section(pls: dict) -> rp.Section:
 
 
 def _lines_section(steps: dict) -> rp.Section:
-    rows = [[f"{L:g} m", st["delay"] * 1e3, L / A_SOUND * 1e3, st["peak_rate"] * 1e-5]
+    rows = [[f"{L:g} m", f"{st['delay'] * 1e3:.1f}", f"{L / A_SOUND * 1e3:.1f}",
+             f"{st['peak_rate'] * 1e-5:.1f}", f"{st['peak_flow'] * 1e3:.2f}"]
             for L, st in steps.items()]
-    return rp.Section("Pressure delay and attenuation (Figs. 6, 7)", [
+    return rp.Section("Pressure and flow delay and attenuation (Figs. 6 to 9)", [
         rp.Paragraph(
             "Open loop, piston at rest at mid-stroke, valve stepped from 5 to 8 V. Delay: time "
             f"until chamber a has risen {DELAY_THRESHOLD * 1e-3:g} kPa. Attenuation: the peak "
-            "rate of rise of the chamber pressure (the line's resistance and volume smooth "
-            "the front). Eq. (4) of the paper: the flow arrives delayed by L_t/a_s and "
-            "attenuated by exp(-R_r L_t / (2 rho a_s))."),
-        rp.Table(["line", "delay, measured", "L / a (a = 343 m/s)", "peak dp_a/dt"], rows,
-                 units=["", "ms", "ms", "bar/s"], caption="Chamber-pressure response to a "
-                 "valve step"),
-        rp.Figure(fig_lines(steps), "Chamber pressures after a valve step, 1 m (solid) and "
-                  "10 m (dashed) lines (the workbench's Figs. 6 and 7)"),
+            "mass flow into the chamber and the peak rate of rise of its pressure (the line's "
+            "resistance and volume smooth the front). Eq. (4) of the paper: the flow arrives "
+            "delayed by L_t/a_s and attenuated by exp(-R_r L_t / (2 rho a_s)). The 10 m line "
+            "also halves the flow it settles at (its resistance), which is what slows the "
+            "piston."),
+        rp.Table(["line", "delay, measured", "L / a (a = 343 m/s)", "peak dp_a/dt",
+                  "peak flow into a"], rows, units=["", "ms", "ms", "bar/s", "g/s"],
+                 caption="Chamber response to a valve step"),
+        rp.Figure(fig_lines(steps), "Chamber pressures and the mass flows at the chamber ends "
+                  "of the lines after a valve step, 1 m (solid) and 10 m (dashed) lines (the "
+                  "workbench's Figs. 6 to 9)"),
     ])
 
 
@@ -335,8 +353,8 @@ def _pid_section(pid, info, vals, vals_i, tries) -> rp.Section:
 
 
 def _transient_section(td, bores, pls) -> rp.Section:
-    rows = [[i + 1, a, b, b - a, c, d, d - c] for i, (a, b, c, d) in enumerate(
-        zip(td["half_1m"], td["half_10m"], td["settle_1m"], td["settle_10m"]))]
+    rows = [[i + 1] + [f"{v:.3f}" for v in (a, b, b - a, c, d, d - c)] for i, (a, b, c, d)
+            in enumerate(zip(td["half_1m"], td["half_10m"], td["settle_1m"], td["settle_10m"]))]
     prm = pls[1.0].params
     return rp.Section("Position transients: 1 m against 10 m (Fig. 5)", [
         rp.Paragraph(
@@ -351,8 +369,9 @@ def _transient_section(td, bores, pls) -> rp.Section:
                  caption="Transient of each setpoint step"),
         rp.Table(["tube bore", "pressure delay 10 m - 1 m", "transient shift",
                   "settling difference", "PID validated on both"],
-                 [[b["diameter"] * 1e3, b["delay"] * 1e3, b["shift"], b["settling"], b["passed"]]
-                  for b in bores], units=["mm", "ms", "s", "s", ""],
+                 [[f"{b['diameter'] * 1e3:g}", f"{b['delay'] * 1e3:.1f}", f"{b['shift']:.3f}",
+                   f"{b['settling']:.3f}", b["passed"]] for b in bores],
+                 units=["mm", "ms", "s", "s", ""],
                  caption=f"The same PID with other tube bores (the plant file's: "
                          f"{prm['lines.diameter'] * 1e3:g} mm); the paper gives none"),
     ])
@@ -361,7 +380,7 @@ def _transient_section(td, bores, pls) -> rp.Section:
 def _results(steps, td, vals) -> list[dict]:
     d_paper = (PAPER["lengths"][0][1] - PAPER["lengths"][0][0]) / A_SOUND
     d_wb = steps[10.0]["delay"] - steps[1.0]["delay"]
-    ratio = steps[10.0]["peak_rate"] / steps[1.0]["peak_rate"]
+    ratio = steps[10.0]["peak_flow"] / steps[1.0]["peak_flow"]
     both = all(v.passed for v in vals.values())
     shift = td["shift"]
     return [
@@ -371,8 +390,8 @@ def _results(steps, td, vals) -> list[dict]:
              f"1 m; agrees within {DELAY_TOL * 1e3:g} ms (the lumped line smears the front over "
              "a few segments)", abs(d_wb - d_paper) <= DELAY_TOL),
         _row("amplitude decay with the longer line", "yes (qualitative)", ratio, "-",
-             PAPER["effects"][2], "peak rate of rise of the chamber pressure, 10 m over 1 m; "
-             "agrees when below 1", ratio < 1.0),
+             PAPER["effects"][2], "peak mass flow into chamber a after a valve step (eq. 4 "
+             "attenuates the flow), 10 m over 1 m; agrees when below 1", ratio < 1.0),
         _row("position transient later with 10 m lines", "yes (Figs. 5, 5a)", shift, "s",
              "Figs. 5, 5a", "mean shift of the half-way time over the setpoint steps; agrees "
              "when above 0", shift > 0),
@@ -450,6 +469,7 @@ def _finish(out, results, steps, pid, info, vals, td, bores, done, t_start, quic
         "paper": "001", "quick": bool(quick), "paper_results": results,
         "delays_s": {f"{L:g}": st["delay"] for L, st in steps.items()},
         "peak_rate_pa_s": {f"{L:g}": st["peak_rate"] for L, st in steps.items()},
+        "peak_flow_kg_s": {f"{L:g}": st["peak_flow"] for L, st in steps.items()},
         "pid": {"kp": pid.kp, "kd": pid.kd, "ki": pid.ki, "sample_time": pid.sample_time},
         "design": info, "validation": {f"{L:g}": v.to_dict() for L, v in vals.items()},
         "transients_s": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
