@@ -126,3 +126,17 @@ def test_end_error_is_the_pressure_gain_error(run):
         assert b["end_error_Pa"] == pytest.approx(b["gain_error_Pa"], abs=tol), b
         checked += 1
     assert checked >= 8
+
+
+def test_written_table_refits_to_the_same_approximation(run, capsys):
+    """valve_table.csv (written with shortest round-trip floats) refitted by the CLI gives
+    the report's approximation I: same R and largest error to rounding (1e-12)."""
+    from workbench.__main__ import main
+    summary, out = run[1], run[2]
+    assert main(["identify", "valve", str(out / "valve_table.csv"), "--approx", "I",
+                 "--coefficients", "66", "--no-tank", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)["approximation_I"]
+    want = summary["fits"]["I (n=5, m=10)"]
+    assert got["degrees"] == {"n_pressure": 5, "m_command": 10}
+    assert got["R"] == pytest.approx(want["R"], abs=1e-12)
+    assert got["max_error_g_s"] == pytest.approx(want["max_error_g_s"], abs=1e-9)

@@ -261,6 +261,8 @@ def _write_plant_toml(args: argparse.Namespace, base: PlantParams, table,
                              + "; ".join(problems) + " (a table that does not cover the "
                              "range, or a different valve than --base states)",
                              location="--plant-toml")
+    from ...plant import Plant
+    Plant(new)                         # the written file must build a plant (raises if not)
     new.to_toml(args.plant_toml)
     result["plant_toml"] = str(args.plant_toml)
     p_base, p_tab = base["supply.pressure"], table.supply_pressure
