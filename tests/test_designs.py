@@ -568,3 +568,112 @@ def test_comparison_design_every_validation_and_figure(comparison_run):
             assert c["pass_rate"] == pytest.approx(np.mean(c["passed"]), rel=1e-12), (key, name)
             assert len(c["scores"]) == len(c["failed_checks"]) == len(r["draws"])
             assert all(p is (not f_) for p, f_ in zip(c["passed"], c["failed_checks"]))
+
+
+def test_situm_design_limits_and_loops_against_python_control(situm_report):
+    """Every key of situm_p_pd's two limit tables and the closed loops' spectral radii,
+    from python-control: the loop 1 / (s (s^2/w0^2 + 2 zeta s/w0 + 1)) discretised with
+    a ZOH (c2d), its gain margin (the sampled limit), with one sample of delay 1/z, the
+    phase crossover (the oscillation's frequency, rad/s) and the phase margin at K0;
+    PCT's Ts = T/2 + 1/w0 (paper 000). Agreement measured 1e-10; 1e-7 relative."""
+    import warnings
+    import control
+    _, out = situm_report
+    s = _load(out)
+    for key in ("limits_table_ii", "limits_rig"):
+        lim = s[key]
+        w0, zeta, T, k0 = lim["w0"], lim["zeta"], lim["sample_time"], lim["k0"]
+        gz = control.c2d(control.tf([1.0], [1 / w0 ** 2, 2 * zeta / w0, 1, 0]), T, "zoh")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)     # python-control's method note
+            gm, _, wcg, _ = control.margin(gz)
+            gmd, _, wcgd, _ = control.margin(gz * control.tf([1], [1, 0], T))
+            gm_k0, pm_k0, _, _ = control.margin(k0 * gz)
+        ref = {"sampled": gm, "sampled_delay": gmd, "sampled_frequency_rad_s": wcg,
+               "sampled_delay_frequency_rad_s": wcgd, "gain_margin": gm_k0,
+               "phase_margin_deg": pm_k0, "continuous": 2 * zeta * w0,
+               "pct_time_constant_s": T / 2 + 1 / w0, "pct": 2 * zeta / (T / 2 + 1 / w0)}
+        for k, v in ref.items():
+            assert lim[k] == pytest.approx(v, rel=1e-7), (key, k)
+        assert lim["gain_margin"] == pytest.approx(lim["sampled"] / k0, rel=1e-9)
+        assert T == 0.01
+    tab, rig = s["limits_table_ii"], s["limits_rig"]
+    # Table II's model (physics.md: w0 = 32.97 rad/s, zeta = 1.1, K0 = 7.0); the rig's
+    # from the exact linearisation (test_rodless_sim_... checks w0, zeta, Kv by hand)
+    assert (tab["w0"], tab["zeta"], tab["k0"]) == (32.97, 1.1, 7.0)
+    assert tab["kv"] is None and tab["kp"] is None
+    assert rig["kp"] == 10.0 and rig["k0"] == pytest.approx(rig["kp"] * rig["kv"], rel=1e-12)
+    for k, v in rig["kp_limits"].items():
+        assert v == pytest.approx(rig[k] / rig["kv"], rel=1e-12), k
+    # closed loops on the rig's reduced model kv / (s (...)) with the ZOH: P (kp = 10)
+    # and the discrete PD u = kp e + kd (e_k - e_k-1) / T (controllers.pd.pid_law)
+    gz = control.c2d(control.tf([rig["kv"]], [1 / rig["w0"] ** 2, 2 * rig["zeta"] / rig["w0"],
+                                              1, 0]), 0.01, "zoh")
+    z = control.tf([1, 0], [1], 0.01)
+    rho = lambda loop: float(np.max(np.abs(control.poles(control.feedback(loop, 1)))))  # noqa
+    assert s["rho_p"] == pytest.approx(rho(10.0 * gz), rel=1e-9)
+    assert s["rho_pd"] == pytest.approx(rho((s["kp_pd"] + s["kd_pd"] * (z - 1) / (0.01 * z)) * gz),
+                                        rel=1e-9)
+
+
+def test_rodless_sim_remaining_keys(rodless_sim):
+    """situm_rodless_sim: the plant, the operating point's position, the reduced model's
+    fit and band, the pressure range from the CSV, the wall time."""
+    _, out, s = rodless_sim
+    d = pd.read_csv(out / "trajectory.csv", comment="#")
+    assert s["plant"] == "designs/plants/situm_rodless.toml" and s["operating_point"]["x"] == 0.25
+    lin = s["exact_linearisation"]
+    assert 0.0 <= lin["fit_error"] < 1e-9          # an exact reduction (symmetric, mid stroke)
+    lo, hi = lin["band_rad_s"]
+    assert lo < lin["w0"] < hi
+    p = np.concatenate([d["p_a"], d["p_b"]])
+    assert s["simulation"]["pressure_range_pa"] == pytest.approx([p.min(), p.max()], rel=1e-12)
+    e = np.abs(d["r"] - d["x"])
+    assert s["simulation"]["max_abs_error_m"] == pytest.approx(e.max(), rel=1e-9)
+    assert s["simulation"]["final_error_m"] == pytest.approx(d["x"].iloc[-1] - d["r"].iloc[-1],
+                                                             abs=1e-12)
+    wall = s["simulation"]["wall_s"]
+    assert isinstance(wall, float) and 0.0 < wall < 60.0
+
+
+def test_concealed_every_case_key(concealed):
+    """diagnose_concealed: per case the seed (seed * 1000 + case), the drawn values
+    (drawn again here from the seed), the score (named, correct, extra findings, relative
+    errors of the fitted values, the 30 % check, the fit gains) from the diagnosis's own
+    JSON, and the timings: every step of each diagnosis (details.json) adds up to no more
+    than its total, which is within the case's wall time, and the cases within the run's."""
+    from workbench.diagnose import synth
+    _, out, s = concealed
+    assert s["quick"] is True and s["total"] == len(s["cases"])
+    assert s["correct"] == sum(c["correct"] for c in s["cases"])
+    expected = {"dry_friction": "dry_friction", "mass_error": "parameter_error", "none": "none"}
+    short = {"friction.coulomb": "coulomb", "friction.static": "static",
+             "friction.stribeck_velocity": "stribeck_velocity", "load.mass": "load.mass"}
+    for i, c in enumerate(s["cases"]):
+        assert c["case"] == i and c["seed"] == 2026 * 1000 + i and c["redrawn"] == []
+        assert c["values"] == pytest.approx(dict(synth.concealed_case(c["concealed"],
+                                                                      seed=c["seed"]).values))
+        res = c["result"]
+        names = [f["effect"] for f in res["findings"]]
+        assert c["expected"] == expected[c["concealed"]]
+        assert c["named"] == (names[0] if names else "none")
+        assert c["correct"] is (c["named"] == c["expected"])
+        assert c["extra_findings"] == names[1:]
+        par = res["findings"][0]["parameters"] if names else {}
+        assert set(c["relative_errors"]) == set(c["values"])
+        for k, rel in c["relative_errors"].items():
+            # the JSON's fitted values are printed to 6 digits: 1e-5 relative
+            assert rel == pytest.approx(par[short[k]] / c["values"][k] - 1.0, abs=1e-5), k
+        checked = synth.CHECKED_KEYS.get(c["concealed"], ())
+        assert c["checked_ok"] is all(abs(c["relative_errors"][k]) <= 0.3 for k in checked)
+        for sig, g in c["fit_gain"].items():
+            assert g == pytest.approx(res["fit_after"][sig] - res["fit_before"][sig], abs=1e-9)
+        # timings: the steps of the diagnosis add up to its total (each rounded to 1 ms)
+        t = json.loads((out / "cases" / f"{i:02d}" / "diagnosis" / "details.json")
+                       .read_text())["timings_s"]
+        parts = [v for k, v in t.items() if k != "total"]
+        assert all(isinstance(v, float) and v >= 0.0 for v in t.values())
+        assert sum(parts) <= t["total"] + 5e-4 * len(parts)
+        assert 0.0 < t["total"] < c["wall_s"]          # the subprocess ran the diagnosis
+        assert 0.0 < c["record_s"]
+    assert s["wall_s"] >= sum(c["wall_s"] + c["record_s"] for c in s["cases"])
