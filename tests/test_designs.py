@@ -677,3 +677,134 @@ def test_concealed_every_case_key(concealed):
         assert 0.0 < t["total"] < c["wall_s"]          # the subprocess ran the diagnosis
         assert 0.0 < c["record_s"]
     assert s["wall_s"] >= sum(c["wall_s"] + c["record_s"] for c in s["cases"])
+
+
+@pytest.fixture(scope="module")
+def force_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("force_tracking")
+    rc, _ = run_design("force_tracking", out)       # shared with tests/test_inversion.py
+    return rc, out, _load(out)
+
+
+def test_force_tracking_every_metric_from_its_csvs(force_run):
+    """force_tracking: each run's figures from its CSV (e = force - force_ref; RMS, max,
+    IAE by the trapezoid rule, air = integral of q_supply, command total variation, the
+    largest position drift, pressure range, duration), the bounds from the reference's
+    span (1 % and 0.2 %), the Monte Carlo tables' arithmetic, the verdict's rule."""
+    rc, out, s = force_run
+    assert s["quick"] is True and rc == (0 if s["design_passed"] else 1)
+    files = {"nominal affine plant": "run_nominal_affine_plant.csv",
+             "rig (four-edge valve)": "run_rig__four_edge_valve.csv"}
+    assert set(s["metrics"]) == set(files) == set(s["plan_deviation"])
+    for name, fname in files.items():
+        d = _csv(out / fname)
+        t = d["t"].to_numpy()
+        e = (d["force"] - d["force_ref"]).to_numpy()
+        m = s["metrics"][name]
+        _close(m["rms_error"], np.sqrt(np.mean(e ** 2)), "rms")
+        _close(m["max_error"], np.abs(e).max(), "max")
+        _close(m["iae"], _trap(np.abs(e), t), "iae")
+        _close(m["air_kg"], _trap(d["q_supply"].to_numpy(), t), "air")
+        _close(m["command_tv"], np.abs(np.diff(d["u"])).sum(), "tv")
+        _close(m["x_drift"], np.abs(d["x"] - d["x"].iloc[0]).max(), "drift")
+        p = np.concatenate([d["p_a"], d["p_b"]])
+        _close(m["p_min"], p.min(), "p_min")
+        _close(m["p_max"], p.max(), "p_max")
+        _close(m["duration"], t[-1], "duration")
+        span = float(np.ptp(d["force_ref"]))
+        _close(s["span"], span, "span")
+        # the plan deviation is a pressure difference: within the supply's range
+        assert 0.0 < s["plan_deviation"][name] < 6e5
+    assert s["bounds"]["max"] == pytest.approx(0.01 * s["span"], rel=1e-12)
+    assert s["bounds"]["rms"] == pytest.approx(0.002 * s["span"], rel=1e-12)
+    nom = s["metrics"]["nominal affine plant"]
+    assert s["design_passed"] is bool(nom["max_error"] <= s["bounds"]["max"]
+                                      and nom["rms_error"] <= s["bounds"]["rms"])
+    # plans: ranges ordered, levels inside the pressure range, feasible, air positive
+    for rule, pl in s["plans"].items():
+        assert pl["p_min"] <= pl["level_min"] <= pl["level_max"] <= pl["p_max"] <= 6e5, rule
+        assert pl["q_max"] > 0 and pl["air_mass"] > 0 and pl["feasible"] is True
+        assert pl["saturated_fraction"] == 0.0 and pl["command_mismatch"] >= 0.0
+    assert s["plans"]["single_valve"]["command_mismatch"] < 1e-9    # its defining rule
+    rb = s["robustness"]
+    # the Monte Carlo judge's bounds: 1 %, 5 % and 2 % of the span (the design's text)
+    assert rb["spec"] == pytest.approx({"hold error": 0.01 * s["span"],
+                                        "peak error": 0.05 * s["span"],
+                                        "RMS error": 0.02 * s["span"]}, rel=1e-12)
+    assert rb["hold_settle"] > 0 and isinstance(rb["run_time"], float) and rb["run_time"] > 0
+    # the tracker on the locked rig is the rig run above: the same RMS error
+    assert rb["nominal"]["tracker (FF + FB) | locked rig"]["rms_error"] == pytest.approx(
+        s["metrics"]["rig (four-edge valve)"]["rms_error"], rel=1e-12)
+    for key, r in rb["nominal"].items():
+        assert r["passed"] is (r["failed"] == []), key
+        assert ("RMS error" in r["failed"]) is (r["rms_error"] > rb["spec"]["RMS error"]), key
+    for plant, res in rb["results"].items():
+        assert res["seed"] == 2026 and len(res["draws"]) == 2
+        for name, c in res["controllers"].items():
+            assert c["pass_rate"] == pytest.approx(np.mean(c["passed"]), rel=1e-12)
+            assert all(p is (f == []) for p, f in zip(c["passed"], c["failed_checks"]))
+            # score = the run's RMS error; a failed "RMS error" check means it is above
+            for sc, f in zip(c["scores"], c["failed_checks"]):
+                assert ("RMS error" in f) is (sc > rb["spec"]["RMS error"]), (plant, name)
+
+
+@pytest.fixture(scope="module")
+def plan_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pressure_plan_position")
+    rc, _ = run_design("pressure_plan_position", out)   # shared with its own test file
+    return rc, out, _load(out)
+
+
+def test_pressure_plan_position_every_metric_from_its_csvs(plan_run):
+    """pressure_plan_position: each run's figures from its CSV (e = x - x_ref; moves are
+    the waypoint intervals where the position changes, holds the rest; the last 0.2 s
+    for the end figure), the waypoints against the CSV's reference, the move and bound
+    (2 % of the largest move), the plan deviations within the plans' pressure range."""
+    rc, out, s = plan_run
+    assert s["quick"] is True and rc == (0 if s["design_passed"] else 1)
+    wp = s["waypoints"]
+    moves = [(a[0], b[0]) for a, b in zip(wp, wp[1:]) if a[1] != b[1]]
+    s_move = max(abs(b[1] - a[1]) for a, b in zip(wp, wp[1:]))
+    assert s["move"] == pytest.approx(s_move, rel=1e-12)
+    assert s["bound"] == pytest.approx(0.02 * s["move"], rel=1e-12)
+    assert s["gains"] == {"kp": 5.0, "kd": 0.1} and s["sample_time"] == 0.01
+    assert s["force_peak"] > 0
+    assert len(s["metrics"]) == 6
+    plan_lo = min(p["p_min"] for p in s["plans"].values())
+    plan_hi = max(p["p_max"] for p in s["plans"].values())
+    for name, m in s["metrics"].items():
+        slug = "".join(ch if ch.isalnum() else "_" for ch in name).strip("_")
+        d = _csv(out / f"run_{slug}.csv")
+        t, x, ref, u = (d[c].to_numpy() for c in ("t", "x", "x_ref", "u"))
+        for tw, xw in wp:                      # the reference passes the waypoints
+            k = int(np.argmin(np.abs(t - tw)))
+            if abs(t[k] - tw) < 1e-9:
+                assert ref[k] == pytest.approx(xw, abs=1e-12)
+        e = x - ref
+        mv = np.zeros(len(t), dtype=bool)
+        for a, b in moves:
+            mv |= (t >= a) & (t <= b)
+        for key, sel in (("", np.ones(len(t), bool)), ("_moves", mv), ("_holds", ~mv)):
+            _close(m[f"max_error{key}"], np.abs(e[sel]).max(), name + key)
+            _close(m[f"rms_error{key}"], np.sqrt(np.mean(e[sel] ** 2)), name + key)
+        _close(m["final_error"], abs(e[-1]), "final")
+        _close(m["max_error_end"], np.abs(e[t >= t[-1] - 0.2]).max(), "end")
+        _close(m["u_min"], u.min(), "u_min")
+        _close(m["u_max"], u.max(), "u_max")
+        _close(m["command_tv"], np.abs(np.diff(u)).sum(), "tv", rel=1e-6)
+        p = np.concatenate([d["p_a"], d["p_b"]])
+        _close(m["p_min"], p.min(), "p_min")
+        _close(m["p_max"], p.max(), "p_max")
+        # max |p_a - plan|: the plan lies within the plans' range
+        dev_bound = max(d["p_a"].max() - plan_lo, plan_hi - d["p_a"].min())
+        assert 0.0 <= m["plan_deviation_pa"] <= dev_bound, name
+    key = "exact-model plant, feedforward + feedback"
+    nom = s["metrics"][key]
+    # on the exact model the feedforward is the motion: errors far inside the bound
+    assert nom["max_error"] <= s["bound"] and nom["max_error_end"] <= 0.1 * s["bound"]
+    for rule, pl in s["plans"].items():
+        assert pl["p_min"] <= pl["level_min"] <= pl["level_max"] <= pl["p_max"], rule
+        assert 0 < pl["stiffness_min"] <= pl["stiffness_max"] and pl["problems"] == []
+        # the plan's force equation is met to rounding (N)
+        assert 0.0 <= pl["force_residual"] < 1e-9 and pl["feasible"] is True
+        assert pl["q_max"] > 0 and pl["air_mass"] > 0 and pl["saturated_fraction"] == 0.0
