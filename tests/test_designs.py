@@ -568,3 +568,243 @@ def test_comparison_design_every_validation_and_figure(comparison_run):
             assert c["pass_rate"] == pytest.approx(np.mean(c["passed"]), rel=1e-12), (key, name)
             assert len(c["scores"]) == len(c["failed_checks"]) == len(r["draws"])
             assert all(p is (not f_) for p, f_ in zip(c["passed"], c["failed_checks"]))
+
+
+def test_situm_design_limits_and_loops_against_python_control(situm_report):
+    """Every key of situm_p_pd's two limit tables and the closed loops' spectral radii,
+    from python-control: the loop 1 / (s (s^2/w0^2 + 2 zeta s/w0 + 1)) discretised with
+    a ZOH (c2d), its gain margin (the sampled limit), with one sample of delay 1/z, the
+    phase crossover (the oscillation's frequency, rad/s) and the phase margin at K0;
+    PCT's Ts = T/2 + 1/w0 (paper 000). Agreement measured 1e-10; 1e-7 relative."""
+    import warnings
+    import control
+    _, out = situm_report
+    s = _load(out)
+    for key in ("limits_table_ii", "limits_rig"):
+        lim = s[key]
+        w0, zeta, T, k0 = lim["w0"], lim["zeta"], lim["sample_time"], lim["k0"]
+        gz = control.c2d(control.tf([1.0], [1 / w0 ** 2, 2 * zeta / w0, 1, 0]), T, "zoh")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)     # python-control's method note
+            gm, _, wcg, _ = control.margin(gz)
+            gmd, _, wcgd, _ = control.margin(gz * control.tf([1], [1, 0], T))
+            gm_k0, pm_k0, _, _ = control.margin(k0 * gz)
+        ref = {"sampled": gm, "sampled_delay": gmd, "sampled_frequency_rad_s": wcg,
+               "sampled_delay_frequency_rad_s": wcgd, "gain_margin": gm_k0,
+               "phase_margin_deg": pm_k0, "continuous": 2 * zeta * w0,
+               "pct_time_constant_s": T / 2 + 1 / w0, "pct": 2 * zeta / (T / 2 + 1 / w0)}
+        for k, v in ref.items():
+            assert lim[k] == pytest.approx(v, rel=1e-7), (key, k)
+        assert lim["gain_margin"] == pytest.approx(lim["sampled"] / k0, rel=1e-9)
+        assert T == 0.01
+    tab, rig = s["limits_table_ii"], s["limits_rig"]
+    # Table II's model (physics.md: w0 = 32.97 rad/s, zeta = 1.1, K0 = 7.0); the rig's
+    # from the exact linearisation (test_rodless_sim_... checks w0, zeta, Kv by hand)
+    assert (tab["w0"], tab["zeta"], tab["k0"]) == (32.97, 1.1, 7.0)
+    assert tab["kv"] is None and tab["kp"] is None
+    assert rig["kp"] == 10.0 and rig["k0"] == pytest.approx(rig["kp"] * rig["kv"], rel=1e-12)
+    for k, v in rig["kp_limits"].items():
+        assert v == pytest.approx(rig[k] / rig["kv"], rel=1e-12), k
+    # closed loops on the rig's reduced model kv / (s (...)) with the ZOH: P (kp = 10)
+    # and the discrete PD u = kp e + kd (e_k - e_k-1) / T (controllers.pd.pid_law)
+    gz = control.c2d(control.tf([rig["kv"]], [1 / rig["w0"] ** 2, 2 * rig["zeta"] / rig["w0"],
+                                              1, 0]), 0.01, "zoh")
+    z = control.tf([1, 0], [1], 0.01)
+    rho = lambda loop: float(np.max(np.abs(control.poles(control.feedback(loop, 1)))))  # noqa
+    assert s["rho_p"] == pytest.approx(rho(10.0 * gz), rel=1e-9)
+    assert s["rho_pd"] == pytest.approx(rho((s["kp_pd"] + s["kd_pd"] * (z - 1) / (0.01 * z)) * gz),
+                                        rel=1e-9)
+
+
+def test_rodless_sim_remaining_keys(rodless_sim):
+    """situm_rodless_sim: the plant, the operating point's position, the reduced model's
+    fit and band, the pressure range from the CSV, the wall time."""
+    _, out, s = rodless_sim
+    d = pd.read_csv(out / "trajectory.csv", comment="#")
+    assert s["plant"] == "designs/plants/situm_rodless.toml" and s["operating_point"]["x"] == 0.25
+    lin = s["exact_linearisation"]
+    assert 0.0 <= lin["fit_error"] < 1e-9          # an exact reduction (symmetric, mid stroke)
+    lo, hi = lin["band_rad_s"]
+    assert lo < lin["w0"] < hi
+    p = np.concatenate([d["p_a"], d["p_b"]])
+    assert s["simulation"]["pressure_range_pa"] == pytest.approx([p.min(), p.max()], rel=1e-12)
+    e = np.abs(d["r"] - d["x"])
+    assert s["simulation"]["max_abs_error_m"] == pytest.approx(e.max(), rel=1e-9)
+    assert s["simulation"]["final_error_m"] == pytest.approx(d["x"].iloc[-1] - d["r"].iloc[-1],
+                                                             abs=1e-12)
+    wall = s["simulation"]["wall_s"]
+    assert isinstance(wall, float) and 0.0 < wall < 60.0
+
+
+def test_concealed_every_case_key(concealed):
+    """diagnose_concealed: per case the seed (seed * 1000 + case), the drawn values
+    (drawn again here from the seed), the score (named, correct, extra findings, relative
+    errors of the fitted values, the 30 % check, the fit gains) from the diagnosis's own
+    JSON, and the timings: every step of each diagnosis (details.json) adds up to no more
+    than its total, which is within the case's wall time, and the cases within the run's."""
+    from workbench.diagnose import synth
+    _, out, s = concealed
+    assert s["quick"] is True and s["total"] == len(s["cases"])
+    assert s["correct"] == sum(c["correct"] for c in s["cases"])
+    expected = {"dry_friction": "dry_friction", "mass_error": "parameter_error", "none": "none"}
+    short = {"friction.coulomb": "coulomb", "friction.static": "static",
+             "friction.stribeck_velocity": "stribeck_velocity", "load.mass": "load.mass"}
+    for i, c in enumerate(s["cases"]):
+        assert c["case"] == i and c["seed"] == 2026 * 1000 + i and c["redrawn"] == []
+        assert c["values"] == pytest.approx(dict(synth.concealed_case(c["concealed"],
+                                                                      seed=c["seed"]).values))
+        res = c["result"]
+        names = [f["effect"] for f in res["findings"]]
+        assert c["expected"] == expected[c["concealed"]]
+        assert c["named"] == (names[0] if names else "none")
+        assert c["correct"] is (c["named"] == c["expected"])
+        assert c["extra_findings"] == names[1:]
+        par = res["findings"][0]["parameters"] if names else {}
+        assert set(c["relative_errors"]) == set(c["values"])
+        for k, rel in c["relative_errors"].items():
+            # the JSON's fitted values are printed to 6 digits: 1e-5 relative
+            assert rel == pytest.approx(par[short[k]] / c["values"][k] - 1.0, abs=1e-5), k
+        checked = synth.CHECKED_KEYS.get(c["concealed"], ())
+        assert c["checked_ok"] is all(abs(c["relative_errors"][k]) <= 0.3 for k in checked)
+        for sig, g in c["fit_gain"].items():
+            assert g == pytest.approx(res["fit_after"][sig] - res["fit_before"][sig], abs=1e-9)
+        # timings: the steps of the diagnosis add up to its total (each rounded to 1 ms)
+        t = json.loads((out / "cases" / f"{i:02d}" / "diagnosis" / "details.json")
+                       .read_text())["timings_s"]
+        parts = [v for k, v in t.items() if k != "total"]
+        assert all(isinstance(v, float) and v >= 0.0 for v in t.values())
+        assert sum(parts) <= t["total"] + 5e-4 * len(parts)
+        assert 0.0 < t["total"] < c["wall_s"]          # the subprocess ran the diagnosis
+        assert 0.0 < c["record_s"]
+    assert s["wall_s"] >= sum(c["wall_s"] + c["record_s"] for c in s["cases"])
+
+
+@pytest.fixture(scope="module")
+def force_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("force_tracking")
+    rc, _ = run_design("force_tracking", out)       # shared with tests/test_inversion.py
+    return rc, out, _load(out)
+
+
+def test_force_tracking_every_metric_from_its_csvs(force_run):
+    """force_tracking: each run's figures from its CSV (e = force - force_ref; RMS, max,
+    IAE by the trapezoid rule, air = integral of q_supply, command total variation, the
+    largest position drift, pressure range, duration), the bounds from the reference's
+    span (1 % and 0.2 %), the Monte Carlo tables' arithmetic, the verdict's rule."""
+    rc, out, s = force_run
+    assert s["quick"] is True and rc == (0 if s["design_passed"] else 1)
+    files = {"nominal affine plant": "run_nominal_affine_plant.csv",
+             "rig (four-edge valve)": "run_rig__four_edge_valve.csv"}
+    assert set(s["metrics"]) == set(files) == set(s["plan_deviation"])
+    for name, fname in files.items():
+        d = _csv(out / fname)
+        t = d["t"].to_numpy()
+        e = (d["force"] - d["force_ref"]).to_numpy()
+        m = s["metrics"][name]
+        _close(m["rms_error"], np.sqrt(np.mean(e ** 2)), "rms")
+        _close(m["max_error"], np.abs(e).max(), "max")
+        _close(m["iae"], _trap(np.abs(e), t), "iae")
+        _close(m["air_kg"], _trap(d["q_supply"].to_numpy(), t), "air")
+        _close(m["command_tv"], np.abs(np.diff(d["u"])).sum(), "tv")
+        _close(m["x_drift"], np.abs(d["x"] - d["x"].iloc[0]).max(), "drift")
+        p = np.concatenate([d["p_a"], d["p_b"]])
+        _close(m["p_min"], p.min(), "p_min")
+        _close(m["p_max"], p.max(), "p_max")
+        _close(m["duration"], t[-1], "duration")
+        span = float(np.ptp(d["force_ref"]))
+        _close(s["span"], span, "span")
+        # the plan deviation is a pressure difference: within the supply's range
+        assert 0.0 < s["plan_deviation"][name] < 6e5
+    assert s["bounds"]["max"] == pytest.approx(0.01 * s["span"], rel=1e-12)
+    assert s["bounds"]["rms"] == pytest.approx(0.002 * s["span"], rel=1e-12)
+    nom = s["metrics"]["nominal affine plant"]
+    assert s["design_passed"] is bool(nom["max_error"] <= s["bounds"]["max"]
+                                      and nom["rms_error"] <= s["bounds"]["rms"])
+    # plans: ranges ordered, levels inside the pressure range, feasible, air positive
+    for rule, pl in s["plans"].items():
+        assert pl["p_min"] <= pl["level_min"] <= pl["level_max"] <= pl["p_max"] <= 6e5, rule
+        assert pl["q_max"] > 0 and pl["air_mass"] > 0 and pl["feasible"] is True
+        assert pl["saturated_fraction"] == 0.0 and pl["command_mismatch"] >= 0.0
+    assert s["plans"]["single_valve"]["command_mismatch"] < 1e-9    # its defining rule
+    rb = s["robustness"]
+    # the Monte Carlo judge's bounds: 1 %, 5 % and 2 % of the span (the design's text)
+    assert rb["spec"] == pytest.approx({"hold error": 0.01 * s["span"],
+                                        "peak error": 0.05 * s["span"],
+                                        "RMS error": 0.02 * s["span"]}, rel=1e-12)
+    assert rb["hold_settle"] > 0 and isinstance(rb["run_time"], float) and rb["run_time"] > 0
+    # the tracker on the locked rig is the rig run above: the same RMS error
+    assert rb["nominal"]["tracker (FF + FB) | locked rig"]["rms_error"] == pytest.approx(
+        s["metrics"]["rig (four-edge valve)"]["rms_error"], rel=1e-12)
+    for key, r in rb["nominal"].items():
+        assert r["passed"] is (r["failed"] == []), key
+        assert ("RMS error" in r["failed"]) is (r["rms_error"] > rb["spec"]["RMS error"]), key
+    for plant, res in rb["results"].items():
+        assert res["seed"] == 2026 and len(res["draws"]) == 2
+        for name, c in res["controllers"].items():
+            assert c["pass_rate"] == pytest.approx(np.mean(c["passed"]), rel=1e-12)
+            assert all(p is (f == []) for p, f in zip(c["passed"], c["failed_checks"]))
+            # score = the run's RMS error; a failed "RMS error" check means it is above
+            for sc, f in zip(c["scores"], c["failed_checks"]):
+                assert ("RMS error" in f) is (sc > rb["spec"]["RMS error"]), (plant, name)
+
+
+@pytest.fixture(scope="module")
+def plan_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pressure_plan_position")
+    rc, _ = run_design("pressure_plan_position", out)   # shared with its own test file
+    return rc, out, _load(out)
+
+
+def test_pressure_plan_position_every_metric_from_its_csvs(plan_run):
+    """pressure_plan_position: each run's figures from its CSV (e = x - x_ref; moves are
+    the waypoint intervals where the position changes, holds the rest; the last 0.2 s
+    for the end figure), the waypoints against the CSV's reference, the move and bound
+    (2 % of the largest move), the plan deviations within the plans' pressure range."""
+    rc, out, s = plan_run
+    assert s["quick"] is True and rc == (0 if s["design_passed"] else 1)
+    wp = s["waypoints"]
+    moves = [(a[0], b[0]) for a, b in zip(wp, wp[1:]) if a[1] != b[1]]
+    s_move = max(abs(b[1] - a[1]) for a, b in zip(wp, wp[1:]))
+    assert s["move"] == pytest.approx(s_move, rel=1e-12)
+    assert s["bound"] == pytest.approx(0.02 * s["move"], rel=1e-12)
+    assert s["gains"] == {"kp": 5.0, "kd": 0.1} and s["sample_time"] == 0.01
+    assert s["force_peak"] > 0
+    assert len(s["metrics"]) == 6
+    plan_lo = min(p["p_min"] for p in s["plans"].values())
+    plan_hi = max(p["p_max"] for p in s["plans"].values())
+    for name, m in s["metrics"].items():
+        slug = "".join(ch if ch.isalnum() else "_" for ch in name).strip("_")
+        d = _csv(out / f"run_{slug}.csv")
+        t, x, ref, u = (d[c].to_numpy() for c in ("t", "x", "x_ref", "u"))
+        for tw, xw in wp:                      # the reference passes the waypoints
+            k = int(np.argmin(np.abs(t - tw)))
+            if abs(t[k] - tw) < 1e-9:
+                assert ref[k] == pytest.approx(xw, abs=1e-12)
+        e = x - ref
+        mv = np.zeros(len(t), dtype=bool)
+        for a, b in moves:
+            mv |= (t >= a) & (t <= b)
+        for key, sel in (("", np.ones(len(t), bool)), ("_moves", mv), ("_holds", ~mv)):
+            _close(m[f"max_error{key}"], np.abs(e[sel]).max(), name + key)
+            _close(m[f"rms_error{key}"], np.sqrt(np.mean(e[sel] ** 2)), name + key)
+        _close(m["final_error"], abs(e[-1]), "final")
+        _close(m["max_error_end"], np.abs(e[t >= t[-1] - 0.2]).max(), "end")
+        _close(m["u_min"], u.min(), "u_min")
+        _close(m["u_max"], u.max(), "u_max")
+        _close(m["command_tv"], np.abs(np.diff(u)).sum(), "tv", rel=1e-6)
+        p = np.concatenate([d["p_a"], d["p_b"]])
+        _close(m["p_min"], p.min(), "p_min")
+        _close(m["p_max"], p.max(), "p_max")
+        # max |p_a - plan|: the plan lies within the plans' range
+        dev_bound = max(d["p_a"].max() - plan_lo, plan_hi - d["p_a"].min())
+        assert 0.0 <= m["plan_deviation_pa"] <= dev_bound, name
+    key = "exact-model plant, feedforward + feedback"
+    nom = s["metrics"][key]
+    # on the exact model the feedforward is the motion: errors far inside the bound
+    assert nom["max_error"] <= s["bound"] and nom["max_error_end"] <= 0.1 * s["bound"]
+    for rule, pl in s["plans"].items():
+        assert pl["p_min"] <= pl["level_min"] <= pl["level_max"] <= pl["p_max"], rule
+        assert 0 < pl["stiffness_min"] <= pl["stiffness_max"] and pl["problems"] == []
+        # the plan's force equation is met to rounding (N)
+        assert 0.0 <= pl["force_residual"] < 1e-9 and pl["feasible"] is True
+        assert pl["q_max"] > 0 and pl["air_mass"] > 0 and pl["saturated_fraction"] == 0.0
