@@ -596,7 +596,7 @@ def _write_experiment(path: Path, ex: dict, setup: dict) -> None:
     """``t, r, u, x`` at the paper's sampling, with the sample time as metadata."""
     lines = [f"# sample_time: {setup['T']:g}",
              "# source: designs/paper_000.py, P loop K0 = 7 on the calibrated rig model",
-             "# units: t s, r m, u V, x m", "t,r,u,x"]
+             "# units: t=s, r=m, u=V, x=m", "t,r,u,x"]
     lines += [f"{t:.4f},{r:.6f},{u:.5f},{x:.7f}"
               for t, r, u, x in zip(ex["t"], ex["r"], ex["u"], ex["x"])]
     atomic_write_text(path, "\n".join(lines) + "\n")
