@@ -99,13 +99,34 @@ def test_tube_bore_explains_the_papers_0_4_s(run):
 def test_pid_designed_and_validated_on_both(run):
     s = run[1]
     pid = s["pid"]
-    assert pid["kp"] > 0 and pid["kd"] > 0 and pid["ki"] == 0.0
+    assert pid["kp"] > 0 and pid["kd"] > 0 and pid["ki"] > 0
     assert pid["sample_time"] == 0.01
     # K0 = kp Kv a third of the exact sampled-data limit (or lower after back-offs)
     assert pid["kp"] * s["design"]["kv"] <= s["design"]["limit"] / 3.0 * (1 + 1e-9)
+    # Ti = (specified settling time 1.5 s) / 4, ki = kp / Ti; band 2 x the 1 mm floor
+    assert pid["ki"] == pytest.approx(pid["kp"] / (1.5 / 4.0), rel=1e-9)
+    assert pid["integral_band"] == pytest.approx(2e-3)
     for L in ("1", "10"):
         assert s["validation"][L]["passed"] is True
     assert _rows(s)["PID positioning works with both line lengths"]["agrees"]
+
+
+def test_integral_removes_a_valve_null_offset(run):
+    """With the valve's zero-flow command 0.015 V above the controller's centre, a PD
+    loop must rest where kp e = 0.015 V (the valve closed, no load): e = 0.015 / kp,
+    computed here; 0.25 mm covers the 12-bit sensor's 0.12 mm quantum and the hold
+    end's residual motion. The PID (integral) removes it and passes; the same PID
+    without its separation band fails (the integral's error area returns as overshoot)."""
+    s = run[1]
+    cmp_ = s["integral_comparison"]
+    e_pd = float(cmp_["PD, valve null offset"]["steady_state_error_mm"]) * 1e-3
+    assert e_pd == pytest.approx(0.015 / s["pid"]["kp"], abs=2.5e-4)
+    assert not cmp_["PD, valve null offset"]["passed"]
+    assert "steady-state error" in cmp_["PD, valve null offset"]["failed"]
+    assert cmp_["PID, valve null offset"]["passed"]
+    assert float(cmp_["PID, valve null offset"]["steady_state_error_mm"]) < 1.0
+    assert cmp_["PID"]["passed"] and cmp_["PD (ki = 0)"]["passed"]
+    assert not cmp_["PID without band"]["passed"]
 
 
 def test_plant_file_marks_assumptions():
