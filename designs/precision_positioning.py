@@ -1,6 +1,6 @@
 """Precision positioning: PID, FL and NMPC with compensation on a rig with friction, deadband, lines.
 
-1. The rig (``designs/plants/precision_rig25.toml``): the 25 mm rodless cylinder with
+1. The rig (``designs/plants/rigs/precision_rig25.toml``): the 25 mm rodless cylinder with
    dry friction (Coulomb 15 N, static 25 N, Stribeck 10 mm/s), 2 % spool overlap, 1 m
    lines of 4 mm bore, 12-bit position sensor, 2 ms loop. The controllers see it
    through rig sensors: the position quantised to 12 bits (0.122 mm), both pressures
@@ -37,7 +37,7 @@ from workbench import report as rp
 from workbench.controllers.evaluation import evaluate_design
 
 HERE = Path(__file__).resolve().parent
-PLANT = HERE / "plants" / "precision_rig25.toml"
+PLANT = HERE / "plants" / "rigs" / "precision_rig25.toml"
 ROOT = HERE.parent
 TITLE = "Precision positioning: PID, FL and NMPC with friction and deadband compensation"
 #: Published real-rig results (issue 14): steady state on a 60 mm step, worst error on
