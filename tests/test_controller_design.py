@@ -145,3 +145,23 @@ def test_nmpc_with_preview_beats_rate_extrapolation_on_the_sine(rig):
     e_online = _sine_error(simulate.closed_loop(rig, online, ref, x0=0.19), ref, 0.5, 2.5)
     e_ahead = _sine_error(simulate.closed_loop(rig, ahead, ref, x0=0.19), ref, 0.5, 2.5)
     assert e_ahead < 0.5 * e_online, (e_ahead, e_online)
+
+
+def test_workbench_design_writes_the_whole_result_set(tmp_path):
+    import json
+    from workbench.cli import main
+    out = tmp_path / "pid"
+    plant = PLANTS / "rig25_mpye.toml"
+    rc = main(["design", str(plant), "--kind", "pid", "--out", str(out), "--quick",
+               "--pressure-noise", "0"])
+    assert rc == 0
+    assert {p.name for p in out.iterdir()} == {"report.html", "report.pdf", "design.json",
+                                               "validation.csv"}
+    d = json.loads((out / "design.json").read_text())
+    assert d["needs"] == ["x", "p_a", "p_b"] and d["validation"]["spec"]["name"] == "precision"
+    assert any(c["name"] == "sine tracking error" for c in d["validation"]["checks"])
+    # a file where the folder should be: refused before any work, nothing written
+    bad = tmp_path / "file"
+    bad.write_text("x")
+    assert main(["design", str(plant), "--out", str(bad), "--quick"]) == 2
+    assert bad.read_text() == "x"
