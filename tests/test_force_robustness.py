@@ -124,8 +124,16 @@ def test_swapped_ports_fail(setup):
     assert set(out.failed) <= set(CHECKS) | {"simulation"}
 
 
-def test_a_solver_failure_is_a_failed_outcome_not_an_exception(setup):
-    # a NaN command stops the integrator (WorkbenchError in the simulator)
+def test_a_solver_failure_is_a_failed_outcome_not_an_exception(setup, monkeypatch):
+    # the integrator gives up (WorkbenchError in the simulator). A NaN command used to
+    # do it only through a CVODES failure on a piston sticking to v ~ 1e-150 m/s,
+    # fixed in physics.friction (issue 14): the failure is now injected
+    from workbench import simulate
+    from workbench.errors import WorkbenchError
+
+    def fail(self, state, u, duration, m=1):
+        raise WorkbenchError(f"integration failed over a {duration:g} s interval with u = {u:g} V")
+    monkeypatch.setattr(simulate.Simulator, "step", fail)
     out = setup["judge"](setup["locked"], Constant(math.nan))
     assert not out.passed and out.failed == ("simulation",)
     assert math.isnan(out.score) and "integration failed" in out.error

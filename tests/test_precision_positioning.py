@@ -1,6 +1,6 @@
 """Issue 14 must-shows on the full plant of designs/precision_positioning.py.
 
-The rig: designs/plants/precision_rig25.toml (dry friction 15/25 N, 2 % spool overlap,
+The rig: designs/plants/rigs/precision_rig25.toml (dry friction 15/25 N, 2 % spool overlap,
 1 m lines, 2 ms loop), seen through a 12-bit position sensor and pressures with
 300 Pa noise, no velocity. The controller is what controllers.design returns for the
 plant file (NMPC, the best of the three in designs/precision_positioning.py). A short
@@ -18,7 +18,8 @@ import pytest
 from workbench import Plant, references
 from workbench.controllers.evaluation import evaluate_design
 
-PLANT = Path(__file__).resolve().parents[1] / "designs" / "plants" / "precision_rig25.toml"
+RIGS = Path(__file__).resolve().parents[1] / "designs" / "plants" / "rigs"
+PLANT = RIGS / "precision_rig25.toml"
 C = 0.25
 
 

@@ -15,6 +15,11 @@ class DiscreteController(Protocol):
     ``sample_time`` seconds with the reference and the measured outputs; the
     command it returns is clipped to the valve's range, quantised by the DAC and
     held until the next sample (ZOH).
+
+    A controller may declare ``needs``, the names of the measurements it reads
+    (e.g. ``("x",)`` for :class:`~workbench.controllers.PID`, ``("x", "v", "p_a",
+    "p_b")`` for FL and NMPC); :func:`workbench.controllers.design` returns
+    controllers that need ``("x", "p_a", "p_b")`` only (an observer supplies v).
     """
 
     sample_time: float

@@ -121,6 +121,7 @@ class VelocityPID:
     preview: Any = None
 
     kind = "pid"
+    needs = ("x", "v")
 
     def reset(self):
         return (0.0, None, 0.0)

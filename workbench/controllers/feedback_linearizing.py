@@ -401,6 +401,9 @@ class FeedbackLinearizing:
     gains: dict = field(init=False)
 
     kind = "feedback linearising"
+    #: Measurements read (wrap in :class:`~workbench.controllers.observer.Observed` to
+    #: run on x, p_a, p_b only).
+    needs = ("x", "v", "p_a", "p_b")
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sample_time", _positive("sample_time", self.sample_time, "s"))

@@ -87,6 +87,9 @@ class PID:
         if self.u_min >= self.u_max:
             raise InputError("u_min must be below u_max")
 
+    #: Measurements read: the position only.
+    needs = ("x",)
+
     @property
     def kind(self) -> str:
         return "pid" if self.ki else ("pd" if self.kd else "p")

@@ -52,10 +52,12 @@ simulator passes; its prediction model must therefore be a 4-state plant
 (:meth:`NMPC.for_plant` reduces any plant file to one: lines, spool dynamics, heat
 transfer and supply droop are left to the feedback). A force observer
 (``disturbance_gain``) estimates what the model lacks (dry friction, a load) from
-the velocity it mispredicted, which gives the loop integral action. The reference
-is known only at the current sample (no preview): over the horizon it is
-extrapolated along the current reference rate when that rate is below
-``reference_rate_limit`` (a ramp), else held (a step).
+the velocity it mispredicted, which gives the loop integral action. Without a
+``preview`` the reference is known only at the current sample: over the horizon it
+is extrapolated along the current reference rate when that rate is below
+``reference_rate_limit`` (a ramp), else held (a step). With ``preview`` (the whole
+reference known in advance, e.g. a smoothed :class:`~workbench.references.Trajectory`)
+the nodes follow it, position and velocity (the chord over one sample).
 
 Examples
 --------

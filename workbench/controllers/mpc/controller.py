@@ -122,6 +122,10 @@ class NMPC:
     jit: bool = field(default=True, metadata=_meta("", "compile to C"))
     preview: Any = field(default=None, metadata=_meta("", "reference known in advance"))
 
+    #: Measurements read (wrap in :class:`~workbench.controllers.observer.Observed` to
+    #: run on x, p_a, p_b only).
+    needs = NMPC_STATES
+
     # ------------------------------------------------------------------ checks
     def __post_init__(self) -> None:
         if self.preview is not None and not callable(self.preview):
