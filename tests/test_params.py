@@ -478,3 +478,10 @@ def test_plant_path_that_is_not_a_regular_file(tmp_path, make):
         os.mkfifo(path)   # reading it would block forever
     with pytest.raises(InputError, match="^" + re.escape(f"{path}: ")):
         PlantParams.from_toml(path)
+
+
+def test_without_line_dynamics_also_drops_the_segments(tmp_path):
+    path = write_plant(tmp_path / "p.toml", effects=("line_dynamics",),
+                       overrides={"lines.segments": 2})
+    params = PlantParams.from_toml(path).without_effect("line_dynamics")
+    assert "line_dynamics" not in params.effects and "lines.segments" not in params

@@ -563,7 +563,8 @@ def test_position_in_mm_is_refused_against_the_stroke(tmp_path, situm_params):
 def test_position_in_mm_with_the_plant_suggests_mm(tmp_path, situm_params):
     # 15 mm written as 15 "m": below the plant-free bound, refused by the 0.5 m stroke
     mm = rig_csv(tmp_path, T_1K, np.full(T_1K.size, 15.0), name="mm.csv")
-    with raises(mm, r".*outside the stroke.*in mm\? declare 'x=mm'"):
+    with raises(mm, r".*outside the stroke.*in mm\? declare it: '# units: x=mm' in the file, "
+                    r"or --columns x=x:mm"):
         load_recording(mm, plant=situm_params)
     assert len(load_recording(mm, columns="x=x:mm", plant=situm_params)) == T_1K.size
 
@@ -699,3 +700,15 @@ def test_fit_of_a_constant_signal_is_null_in_json():
     fits = fit_signals(measured, measured.with_columns(p_b=np.full(50, 3.1e5)))
     assert fits["p_b"] is None and fits["x"] == 100.0
     assert json.loads(json.dumps(fits, allow_nan=False))["p_b"] is None
+
+
+def test_check_of_an_in_memory_recording(situm_params):
+    rec = Recording.from_arrays(T_1K, u=np.full(T_1K.size, 5.0), x=X_M)
+    assert rec.check(situm_params) is rec
+    t = T_1K.copy()
+    t[1000:] += 1e6
+    gap = Recording.from_arrays(t, u=np.full(T_1K.size, 5.0), x=X_M)   # the contract holds
+    with pytest.raises(InputError, match=r"column 't', index 1000: a gap of 1e\+06 s"):
+        gap.check()
+    with pytest.raises(InputError, match=r"column 'x', index 0: 200 m is implausible"):
+        Recording.from_arrays(T_1K, u=np.full(T_1K.size, 5.0), x=X_M * 1e3).check(situm_params)

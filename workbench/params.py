@@ -449,8 +449,11 @@ class PlantParams:
         return PlantParams.from_dict(_nest(new, self.name), source=self.source)
 
     def without_effect(self, effect: str) -> "PlantParams":
-        """A copy with every key of ``effect`` removed."""
-        return self.replace(**{k.path: None for k in EFFECTS[effect]})
+        """A copy with every key of ``effect`` removed (with ``[lines] segments`` for
+        ``line_dynamics``: the number of segments of lines that are gone)."""
+        companions = ("lines.segments",) if effect == "line_dynamics" else ()
+        return self.replace(**{k.path: None for k in EFFECTS[effect]},
+                            **{path: None for path in companions})
 
     # ---------------------------------------------------------------- output
     def to_dict(self) -> dict[str, Any]:

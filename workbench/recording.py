@@ -36,7 +36,7 @@ import numpy as np
 from .errors import InputError
 from .recording_io import KNOWN_COLUMNS, REQUIRED_COLUMNS, Where, read_csv, read_mat, write_atomic
 from .recording_units import (apply_units, check_against_plant, check_plausible,
-                              parse_column_map)
+                              parse_column_map, time_window)
 from .signals import FIT_SIGNALS, fit, fit_signals
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -303,6 +303,29 @@ class Recording:
         return (f"Recording(source={self.source!r}, columns={self.columns!r}, "
                 f"samples={len(self)}, duration={self.duration:.6g} s)")
 
+    def check(self, plant: Any = None) -> "Recording":
+        """Check plausibility (as the file loaders do) and, given a plant, the stroke and
+        the valve's command range; return the recording itself.
+
+        For recordings built in memory (:meth:`from_arrays`), which are checked only
+        against the contract, before they are replayed on a plant.
+
+        Parameters
+        ----------
+        plant : Plant or PlantParams, optional
+
+        Raises
+        ------
+        InputError
+            See :func:`workbench.recording_units.check_plausible` and
+            :func:`workbench.recording_units.check_against_plant`.
+        """
+        check_plausible(self.data, self.metadata, self.source, Where())
+        if plant is not None:
+            check_against_plant(self.data, getattr(plant, "params", plant), self.source,
+                                Where())
+        return self
+
     # ---- derived recordings and export ----------------------------------------------
     def with_columns(self, **arrays: Any) -> "Recording":
         """Return a new recording with columns replaced or added, on the same ``t``.
@@ -445,7 +468,7 @@ def _checked(raw_columns: Any, data: Any, metadata: Any, source: str, where: Whe
     columns_t, data_n, meta = _normalize(names, data, metadata, source, where)
     _validate(columns_t, data_n, meta, source, where, need)
     if window is not None:
-        data_n, where = _window(data_n, window, source, where)
+        data_n, where = time_window(data_n, window, source, where)
     if plausible:
         check_plausible(data_n, meta, source, where)
     if plant is not None:
@@ -459,51 +482,6 @@ def _required(required: Any) -> tuple[str, ...]:
         return REQUIRED_COLUMNS
     names = (required,) if isinstance(required, str) else tuple(required)
     return ("t",) + tuple(n for n in dict.fromkeys(names) if n != "t")
-
-
-class _Shifted(Where):
-    """Locations of a window: sample k of the window is sample k + offset of the file."""
-
-    def __init__(self, inner: Where, offset: int) -> None:
-        self.inner, self.offset = inner, offset
-
-    def header(self) -> str | None:
-        return self.inner.header()
-
-    def column(self, name: str) -> str:
-        return self.inner.column(name)
-
-    def sample(self, index: int) -> str:
-        return self.inner.sample(index + self.offset)
-
-    def cell(self, name: str, index: int) -> str:
-        return self.inner.cell(name, index + self.offset)
-
-    def meta(self, key: str) -> str:
-        return self.inner.meta(key)
-
-
-def _window(data: dict[str, np.ndarray], window: Any, source: str, where: Where
-            ) -> tuple[dict[str, np.ndarray], Where]:
-    """Samples with t0 <= t <= t1, and locations that still name the file's lines."""
-    try:
-        t0, t1 = window
-        lo = -math.inf if t0 is None else float(t0)
-        hi = math.inf if t1 is None else float(t1)
-    except (TypeError, ValueError):
-        raise InputError(f"time window {window!r} is not (t0, t1) in s",
-                         source=source) from None
-    if math.isnan(lo) or math.isnan(hi) or lo >= hi:
-        raise InputError(f"time window [{lo:g}, {hi:g}] s is empty: t0 < t1 is needed",
-                         source=source)
-    t = data["t"]
-    keep = np.flatnonzero((t >= lo) & (t <= hi))
-    if keep.size < 2:
-        raise InputError(f"time window [{lo:g}, {hi:g}] s holds {keep.size} sample(s); the "
-                         f"recording spans {float(t[0]):.6g}..{float(t[-1]):.6g} s",
-                         source=source, location=where.column("t"))
-    first, last = int(keep[0]), int(keep[-1]) + 1
-    return {k: v[first:last] for k, v in data.items()}, _Shifted(where, first)
 
 
 def _normalize(columns: Any, data: Any, metadata: Any, source: str,

@@ -22,18 +22,18 @@ and column, and the likely conversion.
 from __future__ import annotations
 
 import re
-from typing import TYPE_CHECKING, Any, Mapping
+import math
+from typing import Any, Mapping
 
 import numpy as np
 
 from .errors import InputError
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .recording_io import Where
+from .recording_io import Where
 
 __all__ = ["QUANTITY", "UNIT_SCALES", "JITTER_TOLERANCE", "GAP_FACTOR", "MAX_SAMPLE_STEP",
            "MAX_COMMAND", "MAX_POSITION", "STROKE_MARGIN", "COMMAND_MARGIN",
-           "parse_column_map", "apply_units", "check_plausible", "check_against_plant"]
+           "parse_column_map", "apply_units", "check_plausible", "check_against_plant",
+           "time_window"]
 
 _P_ATM = 101325.0  # Pa, offset of gauge pressures
 
@@ -140,7 +140,7 @@ def parse_column_map(spec: str | Mapping[str, Any] | None, source: str = "--colu
     return out
 
 
-def _metadata_units(metadata: Mapping[str, str], source: str, where: "Where"
+def _metadata_units(metadata: Mapping[str, str], source: str, where: Where
                     ) -> dict[str, str]:
     text = metadata.get("units")
     if text is None:
@@ -158,7 +158,7 @@ def _metadata_units(metadata: Mapping[str, str], source: str, where: "Where"
 
 
 def apply_units(columns: list[str], data: Mapping[str, np.ndarray],
-                metadata: Mapping[str, str], source: str, where: "Where",
+                metadata: Mapping[str, str], source: str, where: Where,
                 column_map: Mapping[str, tuple[str, str | None]] | None = None
                 ) -> tuple[list[str], dict[str, np.ndarray], dict[str, str]]:
     """Rename and convert a reader's raw columns to the workbench's SI columns.
@@ -233,7 +233,7 @@ def apply_units(columns: list[str], data: Mapping[str, np.ndarray],
 
 
 def check_plausible(data: Mapping[str, np.ndarray], metadata: Mapping[str, str],
-                    source: str, where: "Where") -> None:
+                    source: str, where: Where) -> None:
     """Refuse what is not a servodrive recording in SI units (plant-free checks).
 
     See the module docstring and the constants :data:`MAX_SAMPLE_STEP`,
@@ -248,7 +248,7 @@ def check_plausible(data: Mapping[str, np.ndarray], metadata: Mapping[str, str],
     t = data["t"]
     steps = np.diff(t)
     step = float(np.median(steps))
-    convert = "declare it ('# units: t=ms' or --columns t=COLUMN:ms)"
+    convert = _declare("t", "ms")
     if step > MAX_SAMPLE_STEP:
         raise InputError(f"the median sample step is {step:.6g} s (duration "
                          f"{float(t[-1] - t[0]):.6g} s); a servodrive recording samples at "
@@ -274,25 +274,30 @@ def check_plausible(data: Mapping[str, np.ndarray], metadata: Mapping[str, str],
                 "of the recording)", source=source, location=where.meta("sample_time"))
     if "u" in data:
         _bound(data["u"], MAX_COMMAND, "u", "V", "valve commands are a few volts: mV? "
-               "declare 'u=mV'", source, where)
+               + _declare("u", "mV"), source, where)
     for name in ("x", "r"):
         if name in data:
-            _bound(data[name], MAX_POSITION, name, "m", "mm? declare "
-                   f"'{name}=mm'", source, where)
+            _bound(data[name], MAX_POSITION, name, "m", "mm? " + _declare(name, "mm"),
+                   source, where)
+
+
+def _declare(name: str, unit: str) -> str:
+    """How to say that column ``name`` is in ``unit``."""
+    return (f"declare it: '# units: {name}={unit}' in the file, or --columns "
+            f"{name}={name}:{unit}")
 
 
 def _bound(y: np.ndarray, limit: float, name: str, unit: str, hint: str, source: str,
-           where: "Where") -> None:
+           where: Where) -> None:
     bad = np.abs(y) > limit
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         raise InputError(f"{float(y[i]):.6g} {unit} is implausible (|{name}| <= {limit:g} "
-                         f"{unit}); {hint} ('# units:' line or --columns)", source=source,
-                         location=where.cell(name, i))
+                         f"{unit}); {hint}", source=source, location=where.cell(name, i))
 
 
 def check_against_plant(data: Mapping[str, np.ndarray], params: Any, source: str,
-                        where: "Where") -> None:
+                        where: Where) -> None:
     """Position within the stroke and command within the valve's range.
 
     Parameters
@@ -327,7 +332,59 @@ def check_against_plant(data: Mapping[str, np.ndarray], params: Any, source: str
         lo, hi = float(y.min()), float(y.max())
         hint = ""
         if low <= lo * 1e-3 and hi * 1e-3 <= high:
-            hint = f"; in {small}? declare '{name}={small}' ('# units:' line or --columns)"
+            hint = f"; in {small}? {_declare(name, small)}"
         raise InputError(f"{float(y[i]):.6g} {unit} is outside {what} (the column spans "
                          f"{lo:.6g}..{hi:.6g} {unit}, {int(bad.sum())} of {y.size} samples "
                          f"outside){hint}", source=source, location=where.cell(name, i))
+
+
+class _Shifted(Where):
+    """Locations of a window: sample k of the window is sample k + offset of the file."""
+
+    def __init__(self, inner: Where, offset: int) -> None:
+        self.inner, self.offset = inner, offset
+
+    def header(self) -> str | None:
+        return self.inner.header()
+
+    def column(self, name: str) -> str:
+        return self.inner.column(name)
+
+    def sample(self, index: int) -> str:
+        return self.inner.sample(index + self.offset)
+
+    def cell(self, name: str, index: int) -> str:
+        return self.inner.cell(name, index + self.offset)
+
+    def meta(self, key: str) -> str:
+        return self.inner.meta(key)
+
+
+def time_window(data: dict[str, np.ndarray], window: Any, source: str, where: Where
+            ) -> tuple[dict[str, np.ndarray], Where]:
+    """Samples with t0 <= t <= t1 (s; None is open), and locations that still name the
+    file's lines.
+
+    Raises
+    ------
+    InputError
+        For a malformed or empty window, or one holding fewer than 2 samples.
+    """
+    try:
+        t0, t1 = window
+        lo = -math.inf if t0 is None else float(t0)
+        hi = math.inf if t1 is None else float(t1)
+    except (TypeError, ValueError):
+        raise InputError(f"time window {window!r} is not (t0, t1) in s",
+                         source=source) from None
+    if math.isnan(lo) or math.isnan(hi) or lo >= hi:
+        raise InputError(f"time window [{lo:g}, {hi:g}] s is empty: t0 < t1 is needed",
+                         source=source)
+    t = data["t"]
+    keep = np.flatnonzero((t >= lo) & (t <= hi))
+    if keep.size < 2:
+        raise InputError(f"time window [{lo:g}, {hi:g}] s holds {keep.size} sample(s); the "
+                         f"recording spans {float(t[0]):.6g}..{float(t[-1]):.6g} s",
+                         source=source, location=where.column("t"))
+    first, last = int(keep[0]), int(keep[-1]) + 1
+    return {k: v[first:last] for k, v in data.items()}, _Shifted(where, first)
