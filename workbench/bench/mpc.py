@@ -7,6 +7,7 @@ interleaved, sample by sample) are what to compare between runs. Nothing here is
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,8 @@ def lockstep(plant, controllers: dict, ref, duration: float, nmpc) -> dict[str, 
         run["x"][0], run["v"][0] = x0[idx[0]], x0[idx[1]]
     r = np.asarray(ref(T * np.arange(n + 1)), dtype=float)
     for k in range(n):
+        if n >= 100 and k % (n // 10) == 0:
+            print(f"bench mpc: sample {k}/{n}", file=sys.stderr, flush=True)
         for name, c in controllers.items():
             run = runs[name]
             y = dict(zip(names, (float(run["state"][i]) for i in idx)))
