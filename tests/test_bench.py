@@ -94,3 +94,23 @@ def test_bench_simulate_case_schema_and_accuracy():
         assert row["available"] and row["within_bound"] and row["error"] <= bound
         assert row["ratio"] == pytest.approx(row["median_s"] / res["median_s"])
     assert np.isfinite(res["baselines"]["scipy_lsoda_per_period"]["error"])
+
+
+def test_bench_mpc_lockstep_scores():
+    # the lockstep loop and the scores on a short run of ours only (the full benchmark
+    # builds IPOPT, do-mpc and OSQP baselines: minutes, not for the suite)
+    from workbench import Plant
+    from workbench.bench import mpc
+    from workbench.controllers.mpc import NMPC
+    plant = Plant.from_toml("designs/plants/rig25_mpye.toml")
+    nmpc = NMPC.for_plant(plant, horizon=10, sample_time=0.01, disturbance_gain=0.0,
+                          jit=False)
+    ref = mpc.bench_reference(plant, 20.0)
+    runs = mpc.lockstep(plant, {"rti": nmpc}, ref, 0.3, nmpc)
+    sc = mpc._scores(runs["rti"], nmpc, 0.01)
+    _check_stats(sc)
+    assert len(runs["rti"]["wall"]) == 30 and sc["cpu_p99_ms"] > 0
+    # the cost is a sum of squares of the tracking error (the reference starts where
+    # the piston rests, then holds): finite and >= 0; IAE <= duration x largest error
+    assert 0.0 <= sc["cost"] < np.inf
+    assert sc["iae_m_s"] <= 0.3 * sc["max_error_m"] + 1e-12

@@ -1,19 +1,30 @@
 """Benchmarks: ``workbench bench NAME [--quick] [--json]``, one module per benchmark.
 
-Each benchmark measures against a baseline in the same run and returns a dict of plain
-data (numbers, strings, lists, dicts; JSON-ready). Timing numbers are for this machine
-at the time of the run; the ratios and accuracy numbers are what to compare between
+Each benchmark measures ours and the strongest plain baselines in the same run
+(interleaved, so load from other processes falls on all alike) and returns a dict of
+plain data (JSON-ready) with a common core (:mod:`.timing`)::
+
+    {"benchmark", "median_s", "cpu_median_s", "spread": {"repeats", "wall_s", "cpu_s"},
+     "error" or "cost", "baselines": {name: {"median_s", "error", "ratio",
+     "description", "available", ...}}, "machine", ...}
+
+``ratio`` is the baseline's median over ours (> 1: ours faster); a baseline that
+needs the ``bench`` extra (numba, osqp, do-mpc) and cannot run says so
+(``available: false`` and ``reason``). Timing numbers are for this machine and its
+load at the time of the run; the ratios and the errors are what to compare between
 runs. Nothing here is a test.
 
 Every module ``workbench.bench.NAME`` exposes ``bench(quick: bool = False) -> dict``;
-the modules are imported only when their benchmark runs (they pull in do-mpc, IPOPT,
-compilers...).
+the modules are imported only when their benchmark runs.
 
-* :mod:`.simulate` -- closed loop, 25 mm plant: compiled loop and CVODES vs scipy LSODA;
-* :mod:`.sweep` -- 200 x 200 stability map vs a python-control loop;
-* :mod:`.rls` -- RLS over 10^6 samples vs a numpy loop;
-* :mod:`.greybox` -- 4 parameters from a 20 s, 1 kHz recording;
-* :mod:`.mpc` -- NMPC solve times over a 20 s closed loop, vs do-mpc when installed;
+* :mod:`.simulate` -- 24 s closed loop, 4 states and 22 (lines, valve), by accuracy
+  (:mod:`.adaptive_loop`) vs CVODES in a ``mapaccum`` and a compiled RK4
+  (:mod:`.baselines_simulate`) at the same 0.1 % bound;
+* :mod:`.sweep` -- 200 x 200 stability map vs a point loop with the model built once;
+* :mod:`.rls` -- RLS over 10^6 samples vs a numba loop of the same recursion;
+* :mod:`.greybox` -- 4 parameters from a 20 s, 1 kHz recording (no baseline yet);
+* :mod:`.mpc` -- NMPC per sample vs a plain Gauss-Newton RTI, IPOPT (Gauss-Newton,
+  warm) and do-mpc, all in lockstep (:mod:`.baselines_mpc`);
 * :mod:`.diagnose` -- a whole diagnosis of a 24 s, 1 kHz recording.
 
 >>> from workbench import bench

@@ -113,12 +113,16 @@ def _case(plant, duration: float, quick: bool, cvodes_ladder=CVODES_LADDER,
     x0 = plant.initial_state(0.25)
     rv = np.asarray(ref(T * np.arange(n)), dtype=float)
     bound = ACCURACY * plant.stroke
+    print(f"bench simulate: {len(plant.states)} states, {duration:g} s: reference (scipy "
+          "Radau, cached after the first run)...", file=sys.stderr, flush=True)
     truth, ref_info = radau_reference(plant, ctrl, ref, n, x0)
     loop = AdaptiveLoop(plant, ctrl)
     loop.compile()
 
     def ours():
         return loop.run(ref, duration, x0)
+    print("bench simulate: calibrating the baselines (CVODES, RK4) to the bound...",
+          file=sys.stderr, flush=True)
     cv = _calibrate(lambda tol: bl.cvodes_mapaccum(plant, ctrl, n, tol, tol), cvodes_ladder,
                     truth, rv, x0, bound)
     rk = _calibrate(lambda m: bl.rk4_compiled(plant, ctrl, n, m), rk4_ladder, truth, rv, x0,
@@ -128,6 +132,7 @@ def _case(plant, duration: float, quick: bool, cvodes_ladder=CVODES_LADDER,
         fns["cvodes_mapaccum"] = lambda: cv[1](rv, x0)
     if rk:
         fns["rk4_compiled"] = lambda: rk[1](rv, x0)
+    print("bench simulate: timing (interleaved repeats)...", file=sys.stderr, flush=True)
     res, stats = interleaved(fns, repeats=5 if quick else 15)
     err = float(np.max(np.abs(res["ours"]["x"] - truth)))
     med = stats["ours"]["median_s"]

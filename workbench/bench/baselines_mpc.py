@@ -1,0 +1,189 @@
+"""Baselines of ``workbench bench mpc``: the NMPC's own problem solved as a competent
+CasADi user would, without the workbench's condensing and compiled step.
+
+All take the same multiple-shooting NLP as the NMPC's IPOPT mode (its RK4 interval
+map, scaled variables, cost and soft limits: ``nmpc._problem.ipopt._nlp()``), built
+from an NMPC with ``jit=False`` so that it can be generated as C:
+
+* :class:`PlainRTI`: one Gauss-Newton step per sample on the sparse (uncondensed)
+  QP, Jacobians compiled to C, OSQP (warm started, updated in place), primal
+  shifted by one sample;
+* :func:`ipopt_gauss_newton`: IPOPT to convergence with the Gauss-Newton Hessian
+  (the cost's: constraint curvature left out, via ``hess_lag``), the NLP expanded to
+  SX, warm start from the shifted primal and dual solution;
+* :func:`do_mpc_recommended`: the workbench's do-mpc set-up with the IPOPT options
+  do-mpc's documentation recommends for speed (``expand``, warm start, no output).
+
+Every controller has ``sample_time``, ``reset()`` and ``update(state, r, y) -> (state,
+u)`` like :class:`~workbench.controllers.mpc.NMPC`.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..controllers.mpc import horizon_reference
+from ..integrate.jit import compiled
+
+__all__ = ["PlainRTI", "ipopt_gauss_newton", "do_mpc_recommended", "osqp_unavailable"]
+
+
+def osqp_unavailable() -> str | None:
+    """None when osqp (the ``bench`` extra) imports, else why not."""
+    try:
+        import osqp  # noqa: F401
+    except ImportError as exc:
+        return f"osqp is not installed (pip install workbench[bench]): {exc}"
+    return None
+
+
+class _Shifted:
+    """Common part: the NLP, its bounds, parameters of one sample, the shifted guess."""
+
+    def __init__(self, nmpc) -> None:
+        self.nmpc, self.sample_time = nmpc, nmpc.sample_time
+        self.pb = pb = nmpc._problem
+        ip = pb.ipopt
+        self.nlp = ip._nlp()
+        self.lbw, self.ubw, self.lbg, self.ubg = ip._lbw, ip._ubw, ip._lbg, ip._ubg
+        self.nxs, self.N = pb.nx * (pb.N + 1), pb.N
+
+    def params(self, r: float, r_prev, y: dict) -> np.ndarray:
+        pb = self.pb
+        z = np.array([y["x"], y["v"], y["p_a"], y["p_b"]]) / pb.sx
+        _, rate = horizon_reference(r, r_prev, pb.T, 1, self.nmpc.reference_rate_limit)
+        return np.concatenate([z, [r / pb.L, rate / pb.L, self.u_prev, 0.0], pb.P]), z
+
+    def guess(self, w, z):
+        if w is None:                     # at rest at the measured state, command centred
+            X = np.tile(z, self.N + 1)
+            return np.concatenate([X, np.zeros(self.N), np.zeros(self.pb.ns)])
+        X = w[:self.nxs].reshape(self.N + 1, -1)
+        U = w[self.nxs:self.nxs + self.N]
+        return np.concatenate([np.vstack([X[1:], X[-1:]]).ravel(), np.append(U[1:], U[-1]),
+                               np.zeros(self.pb.ns)])
+
+    def command(self, w) -> float:
+        return self.pb.u_c + self.pb.u_s * float(w[self.nxs])
+
+    def reset(self):
+        self.u_prev = 0.0
+        return None
+
+
+class PlainRTI(_Shifted):
+    """Gauss-Newton real-time iteration: one sparse QP per sample.
+
+    ``qp="osqp"``: the osqp package (set up once, updated in place, warm started;
+    ``eps`` its tolerances, polishing on); otherwise a CasADi ``conic`` plugin on the
+    same sparse QP (``"qpoases"``: its sparse Schur-complement variant). The Hessian
+    is the cost's (constant: the cost is quadratic) plus ``regularisation`` I.
+    """
+
+    def __init__(self, nmpc, qp: str = "osqp", eps: float = 1e-4,
+                 regularisation: float = 1e-8) -> None:
+        import scipy.sparse as sp
+        super().__init__(nmpc)
+        w, p, f, g = (self.nlp[k] for k in ("x", "p", "f", "g"))
+        nw = w.shape[0]
+        lin = ca.Function("wb_rti_lin", [w, p], [ca.gradient(f, w), g, ca.jacobian(g, w)])
+        self.lin = compiled(lin)            # MX: the interval map's derivatives mapped, not unrolled
+        H = ca.Function("h", [w, p], [ca.hessian(f, w)[0]])(np.zeros(nw), np.zeros(p.shape[0]))
+        self.H = H + regularisation * ca.DM.eye(nw)       # constant; strictly convex
+        self.kind, self.failures, self.nw = qp, 0, nw
+        sa = self.lin.sparsity_out(2)
+        if qp == "osqp":
+            import osqp
+            A0 = sp.vstack([sp.csc_matrix((np.ones(sa.nnz()), sa.row(), sa.colind()),
+                                          shape=sa.shape), sp.eye(nw)], format="csc")
+            self.qp = osqp.OSQP()
+            self.qp.setup(P=sp.triu(sp.csc_matrix(self.H.sparse()), format="csc"),
+                          q=np.zeros(nw), A=A0, l=-np.ones(A0.shape[0]), u=np.ones(A0.shape[0]),
+                          eps_abs=eps, eps_rel=eps, warm_starting=True, polishing=True,
+                          verbose=False, max_iter=4000)
+            self._perm = A0            # the CSC order of [G; I] equals G's then I's per column
+        else:
+            opts = {"error_on_fail": False, "printLevel": "none", "sparse": True} \
+                if qp == "qpoases" else {"error_on_fail": False}
+            self.qp = ca.conic("wb_rti_qp", qp, {"h": self.H.sparsity(), "a": sa}, opts)
+        self.u_prev = 0.0
+
+    def _solve(self, grad, g, G, w) -> np.ndarray | None:
+        lba, uba = self.lbg - g, self.ubg - g
+        if self.kind != "osqp":
+            sol = self.qp(h=self.H, g=grad, a=G, lba=lba, uba=uba, lbx=self.lbw - w,
+                          ubx=self.ubw - w)
+            ok = self.qp.stats().get("success", False)
+            return np.asarray(sol["x"]).ravel() if ok else None
+        import scipy.sparse as sp
+        A = sp.vstack([sp.csc_matrix(G.sparse()), sp.eye(self.nw)], format="csc")
+        self.qp.update(q=np.asarray(grad).ravel(), Ax=A.data,
+                       l=np.concatenate([lba, self.lbw - w]), u=np.concatenate([uba, self.ubw - w]))
+        res = self.qp.solve()
+        return res.x if res.info.status_val in (1, 2) else None     # solved (inaccurate)
+
+    def update(self, state, r: float, y: dict):
+        w_prev, r_prev = (None, None) if state is None else state
+        p, z = self.params(r, r_prev, y)
+        w = self.guess(w_prev, z)
+        for _ in range(10 if state is None else 1):        # converge at the first sample
+            grad, g, G = self.lin(w, p)
+            dw = self._solve(np.asarray(grad).ravel(), np.asarray(g).ravel(), G, w)
+            if dw is None or not np.all(np.isfinite(dw)):
+                self.failures += 1
+                break
+            w = w + dw
+        self.u_prev = float(w[self.nxs])
+        return (w, r), self.command(w)
+
+
+class _Ipopt(_Shifted):
+    def __init__(self, nmpc, gauss_newton: bool = True) -> None:
+        super().__init__(nmpc)
+        w, p, f = self.nlp["x"], self.nlp["p"], self.nlp["f"]
+        ip = {"print_level": 0, "sb": "yes", "tol": 1e-8, "max_iter": 200,
+              "warm_start_init_point": "yes", "warm_start_bound_push": 1e-8,
+              "warm_start_mult_bound_push": 1e-8, "warm_start_slack_bound_push": 1e-8,
+              "mu_init": 1e-6}
+        opts = {"print_time": False, "ipopt": ip, "expand": True}
+        if gauss_newton:
+            lf, lg = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", self.nlp["g"].shape[0])
+            opts["hess_lag"] = ca.Function("nlp_hess_l", [w, p, lf, lg],
+                                           [ca.triu(lf * ca.hessian(f, w)[0])],
+                                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+        self.solver = ca.nlpsol("wb_gn_ipopt", "ipopt", self.nlp, opts)
+        self.u_prev = 0.0
+
+    def update(self, state, r: float, y: dict):
+        w_prev, lam, r_prev = (None, None, None) if state is None else state
+        p, z = self.params(r, r_prev, y)
+        args = dict(x0=self.guess(w_prev, z), p=p, lbx=self.lbw, ubx=self.ubw, lbg=self.lbg,
+                    ubg=self.ubg)
+        if lam is not None:
+            args["lam_x0"], args["lam_g0"] = self.pb.ipopt.shift_duals(lam)
+        sol = self.solver(**args)
+        w = np.asarray(sol["x"]).ravel()
+        self.u_prev = float(w[self.nxs])
+        return (w, (np.asarray(sol["lam_x"]), np.asarray(sol["lam_g"])), r), self.command(w)
+
+
+def ipopt_gauss_newton(nmpc) -> _Ipopt:
+    """IPOPT, Gauss-Newton Hessian, expanded NLP, warm started (primal and dual)."""
+    return _Ipopt(nmpc, gauss_newton=True)
+
+
+def do_mpc_recommended(nmpc):
+    """The workbench's do-mpc set-up (:class:`~workbench.controllers.mpc.DoMPC`) with the
+    IPOPT options do-mpc's documentation recommends for speed: ``expand`` the NLP to SX,
+    IPOPT warm started from the previous solution do-mpc already passes, no output."""
+    from ..controllers.mpc import DoMPC
+
+    class _Recommended(DoMPC):
+        def _reference(self, mpc) -> None:
+            mpc.settings.nlpsol_opts.update({
+                "expand": True, "ipopt.warm_start_init_point": "yes",
+                "ipopt.warm_start_bound_push": 1e-8, "ipopt.warm_start_mult_bound_push": 1e-8,
+                "ipopt.mu_init": 1e-6})
+            super()._reference(mpc)
+    return _Recommended(nmpc)
