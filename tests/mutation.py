@@ -113,7 +113,8 @@ LIN_VAL = ("tests/test_json_values.py::test_linearize_residual_recomputed_from_f
 DESIGN_VAL = ("tests/test_designs.py::test_nmpc_design_every_key",)
 JIT = ("tests/test_integrate.py", "tests/test_simulate.py::test_compiled_loop_native_matches_vm",
        "tests/test_simulate.py::test_compiled_loop_without_compiler_runs_the_vm")
-OUTPUT = ("tests/test_output.py",)
+OUTPUT = ("tests/test_output.py",
+          "tests/test_simulate.py::test_result_set_refuses_an_input_however_its_path_is_spelled")
 
 
 def _m(name, group, file, original, replacement, description, tests):
