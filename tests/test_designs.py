@@ -253,6 +253,45 @@ def _load(out):
     return json.loads((out / "summary.json").read_text(), parse_constant=float)
 
 
+def _rig_pd_rho(kp, kd, T=0.01):
+    """|z|max of the rig's (rig25_mpye.toml) sampled PD loop at mid stroke, by
+    python-control: the central-difference tangent x/u at the equilibrium (minimal,
+    order 3), c2d with a ZOH at T, the discrete PD kp + kd (z - 1) / (T z)
+    (controllers.pd.pid_law), unity feedback."""
+    import control
+    from workbench import Plant
+    from workbench.equilibrium import operating_point
+    from conftest import central_jacobian
+    rig = Plant.from_toml(ROOT / "designs" / "plants" / "rig25_mpye.toml")
+    op = operating_point(rig, 0.25)
+    a, b = central_jacobian(rig.evaluate_f, np.asarray(op.state, float), op.u,
+                            np.array([0.5, 1.0, 1e5, 1e5]), 1e-5)
+    num, den = signal.ss2tf(a, b[:, None], np.array([[1.0, 0, 0, 0]]), np.zeros((1, 1)))
+    gz = control.c2d(control.tf(num[0], den).minreal(tol=1e-6), T, "zoh")
+    z = control.tf([1, 0], [1], T)
+    loop = (kp + kd * (z - 1) / (T * z)) * gz
+    return float(np.max(np.abs(control.poles(control.feedback(loop, 1)))))
+
+
+#: The nominal values of rig25_mpye.toml the Monte Carlo draws are spread around.
+RIG25_NOMINAL = {"gas.polytropic_index": 1.2, "valve.sonic_conductance": 6.25e-8,
+                 "load.mass": 1.2, "supply.pressure": 6e5}
+
+
+def _draws_within_their_ranges(r):
+    """Each Monte Carlo draw inside its uncertainty's range (workbench.robustness modes:
+    'value' low..high, 'factor' nominal x low..high, 'offset' nominal + low..high)."""
+    for u in r["uncertainty"]:
+        k, lo, hi, mode = u["key"], u["low"], u["high"], u["mode"]
+        nom = RIG25_NOMINAL[k]
+        bounds = {"value": (lo, hi), "factor": (nom * lo, nom * hi),
+                  "offset": (nom + lo, nom + hi)}.get(mode)
+        for d in r["draws"]:
+            if bounds is not None:
+                assert bounds[0] <= d[k] <= bounds[1], (k, mode, d[k])
+            assert d[k] > 0, k
+
+
 @pytest.fixture(scope="module")
 def fl_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("fl_position")
@@ -316,9 +355,12 @@ def test_fl_design_every_key(fl_run):
         assert st["fraction"] == pytest.approx(st["max_error"] / abs(st["size"]), rel=1e-12)
     assert ms["worst_fraction"] == max(st["fraction"] for st in ms["steps"])
     assert ms["bound"] == 0.02 and ms["worst_fraction"] < ms["bound"]
-    # PD: the stable sampled loop (|z| < 1) the design compares against; the plant
-    # file's PD (20, 1) is not (rho > 1), which is why the design retunes it
-    assert s["pd"]["rho"] < 1.0 < s["rho_file_pd"] and s["pd"]["kp"] > 0 and s["pd"]["kd"] > 0
+    # PD: the stable sampled loop (|z| < 1) the design compares against; formats.md's
+    # example PD (20, 1) is not (rho > 1), which is why the design retunes it. Both
+    # spectral radii from python-control (see _rig_pd_rho); measured agreement 4e-12
+    assert s["pd"]["rho"] < 1.0 < s["rho_file_pd"]
+    assert s["pd"]["rho"] == pytest.approx(_rig_pd_rho(s["pd"]["kp"], s["pd"]["kd"]), rel=1e-7)
+    assert s["rho_file_pd"] == pytest.approx(_rig_pd_rho(20.0, 1.0), rel=1e-7)
     # the quick verdict's rule (the validations of short holds are not judged): the
     # must-show bound and both refusals given
     refusals = all("refused" in r[2] for r in s["refused"])
@@ -398,6 +440,7 @@ def test_comparison_design_every_validation_and_figure(comparison_run):
     assert 0.0 <= f["u_min"] <= f["u_max"] <= 10.0 and 0 < f["x_min"] < f["x_max"] < 0.5
     assert s["pd"] == {"kp": 8.0, "kd": 0.1}
     for key, r in s["robustness"].items():
+        _draws_within_their_ranges(r)
         for name, c in r["controllers"].items():
             assert c["pass_rate"] == pytest.approx(np.mean(c["passed"]), rel=1e-12), (key, name)
             assert len(c["scores"]) == len(c["failed_checks"]) == len(r["draws"])
@@ -574,6 +617,7 @@ def test_force_tracking_every_metric_from_its_csvs(force_run):
         assert ("RMS error" in r["failed"]) is (r["rms_error"] > rb["spec"]["RMS error"]), key
     for plant, res in rb["results"].items():
         assert res["seed"] == 2026 and len(res["draws"]) == 2
+        _draws_within_their_ranges(res)
         for name, c in res["controllers"].items():
             assert c["pass_rate"] == pytest.approx(np.mean(c["passed"]), rel=1e-12)
             assert all(p is (f == []) for p, f in zip(c["passed"], c["failed_checks"]))
