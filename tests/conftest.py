@@ -8,9 +8,11 @@ values in the range a rig engineer would write.
 from __future__ import annotations
 
 import copy
+import math
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
+import numpy as np
 import pytest
 import tomli_w
 
@@ -168,3 +170,176 @@ def central_jacobian(fun, x, u: float, x_scales, u_step: float):
         e[j] = 1e-6 * x_scales[j]
         cols.append((fun(x + e, u) - fun(x - e, u)) / (2 * e[j]))
     return np.column_stack(cols), (fun(x, u + u_step) - fun(x, u - u_step)) / (2 * u_step)
+
+
+# ------------------------------------------------ design summaries (issue 17, test_designs)
+# The validations and whole-run figures the designs write (workbench.validate /
+# workbench.compare), recomputed here from the CSV each design writes of the same run
+# (t, u, x, p_a, p_b, r[, q_supply] at the output grid, printed to the last digit) by
+# the definitions of the docstrings, written out independently. Tolerance 1e-9
+# relative (+1e-12 absolute): the same arithmetic on the same numbers.
+
+#: validate.Specification's documented defaults (its docstring; formats.md).
+SPEC_DEFAULTS = {"max_overshoot": 10.0, "max_settling_time": 1.5, "settling_band": 0.02,
+                 "band_floor": 1e-3, "max_steady_state_error": 1e-3, "steady_state_window": 0.5,
+                 "max_saturation": 0.1, "max_ramp_error": 0.02, "pressure_tolerance": 2e4}
+RHO_ANR_KG_M3 = 1.185          # physics.md: ISO 6358 / ANR reference density
+
+
+def close_value(a, b, what, rel=1e-9, abs_=1e-12):
+    """a == b to rounding, NaN == NaN and inf == inf."""
+    a, b = float(a), float(b)
+    if math.isnan(b) or math.isinf(b):
+        assert (math.isnan(a) and math.isnan(b)) or a == b, (what, a, b)
+    else:
+        assert a == pytest.approx(b, rel=rel, abs=abs_), (what, a, b)
+
+
+def trapezoid(y, t):
+    """Trapezoid rule over samples y at instants t (written out)."""
+    return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
+
+
+def _seg_values(seg, t, x, r, spec):
+    """One segment's metrics by the definitions of workbench.metrics' docstrings."""
+    sel = (t >= seg["start"] - 1e-9) & (t <= seg["end"] + 1e-9)
+    tt, xx = t[sel], x[sel]
+    rr = r[sel] if seg["kind"] == "ramp" else np.full(len(tt), seg["r_end"])
+    e = np.abs(rr - xx)
+    out = {"tracking_error": float(np.max(e)), "iae": trapezoid(e, tt)}
+    w = min(spec["steady_state_window"], 0.5 * (seg["end"] - seg["start"]))
+    if seg["kind"] in ("step", "hold"):
+        win = tt >= seg["end"] - w - 1e-9
+        out["steady_state_error"] = trapezoid(e[win], tt[win]) / (tt[win][-1] - tt[win][0])
+    if seg["kind"] == "step":
+        size = seg["r_end"] - seg["r_start"]
+        sgn = math.copysign(1.0, size)
+        band = max(spec["settling_band"] * abs(size), spec["band_floor"])
+        over = max(float(np.max(sgn * (xx - seg["r_end"]))), 0.0)
+        out.update(overshoot=100.0 * over / abs(size), overshoot_abs=over, band=band)
+        # settling: from the last sample outside the band, interpolated; inf when that
+        # is within the last window of the segment (still moving at its end)
+        outside = np.flatnonzero(np.abs(xx - seg["r_end"]) > band)
+        if len(outside) == 0:
+            st = 0.0
+        else:
+            k = int(outside[-1])
+            if k == len(tt) - 1 or tt[k] >= tt[-1] - w:
+                st = math.inf
+            else:
+                a_, b_ = abs(xx[k] - seg["r_end"]), abs(xx[k + 1] - seg["r_end"])
+                st = tt[k] + (a_ - band) / (a_ - b_) * (tt[k + 1] - tt[k]) - seg["start"]
+        out["settling_time"] = st
+        prog = sgn * (xx - seg["r_start"]) / abs(size)
+
+        def cross(level):
+            k = np.flatnonzero(prog >= level)
+            if len(k) == 0:
+                return math.inf
+            k = int(k[0])
+            return tt[k] if k == 0 else tt[k - 1] + (level - prog[k - 1]) / (
+                prog[k] - prog[k - 1]) * (tt[k] - tt[k - 1])
+        out["rise_time"] = cross(0.9) - cross(0.1) if math.isfinite(cross(0.9)) else math.inf
+    return out
+
+
+def check_validation(v, df, u_limits=(0.0, 10.0), p_atm=101325.0, p_s=6e5):
+    """A ``Validation.to_dict()`` against the CSV of the same run (see above)."""
+    t, x, u, r = (df[c].to_numpy() for c in ("t", "x", "u", "r"))
+    p_all = np.concatenate([df["p_a"].to_numpy(), df["p_b"].to_numpy()])
+    spec = v["spec"]
+    assert spec == SPEC_DEFAULTS
+    assert isinstance(v["label"], str) and v["label"] and v["error"] is None
+    assert isinstance(v["wall_time"], float) and v["wall_time"] > 0.0
+    segs = v["segments"]
+    # the segments tile the profile, and the CSV's r is their reference
+    assert segs[0]["start"] == 0.0 and all(a["end"] == b["start"] for a, b in zip(segs, segs[1:]))
+    for s in segs:
+        sel = (t > s["start"] + 1e-9) & (t < s["end"] - 1e-9)
+        ref = (s["r_start"] + (t[sel] - s["start"]) / (s["end"] - s["start"])
+               * (s["r_end"] - s["r_start"])) if s["kind"] == "ramp" else s["r_end"]
+        np.testing.assert_allclose(r[sel], ref, atol=1e-12)
+        assert s["complete"] is True
+        mine = _seg_values(s, t, x, r, spec)
+        for k in ("overshoot", "overshoot_abs", "settling_time", "rise_time", "band",
+                  "steady_state_error", "tracking_error", "iae"):
+            close_value(s[k], mine.get(k, math.nan), (s["kind"], s["start"], k))
+    m = v["metrics"]
+    close_value(m["iae"], trapezoid(np.abs(r - x), t), "iae")
+    lo, hi = u_limits
+    sat = (u <= lo + 1e-9 * (hi - lo)) | (u >= hi - 1e-9 * (hi - lo))
+    close_value(m["saturation_fraction"], np.sum(np.diff(t) * sat[:-1]) / (t[-1] - t[0]), "sat")
+    close_value(m["p_min"], p_all.min(), "p_min")
+    close_value(m["p_max"], p_all.max(), "p_max")
+    ramps = [_seg_values(s, t, x, r, spec)["tracking_error"] for s in segs if s["kind"] == "ramp"]
+    close_value(m["ramp_error_max"], max(ramps), "ramp_error_max")
+    close_value(m["simulated_time"], t[-1], "simulated_time")
+    close_value(m["duration"], segs[-1]["end"], "duration")
+    assert m["simulated_time"] >= m["duration"] - 1e-9
+    # the checks: each value, its limit, and pass = value within the limit
+    checks = {c["name"]: c for c in v["checks"]}
+    assert list(checks) == ["simulation", "overshoot", "settling time", "steady-state error",
+                            "ramp tracking error", "command saturation",
+                            "min chamber pressure", "max chamber pressure"]
+    for c in v["checks"]:
+        ok = c["value"] <= c["limit"] if c["bound"] == "max" else c["value"] >= c["limit"]
+        assert c["passed"] is bool(ok), c
+    steps = [s for s in segs if s["kind"] == "step"]
+    close_value(checks["simulation"]["value"], m["duration"], "simulation")
+    close_value(checks["overshoot"]["value"], max(
+        steps, key=lambda s: s["overshoot"] / max(spec["max_overshoot"], 100 * spec["band_floor"]
+                                                   / abs(s["r_end"] - s["r_start"])))["overshoot"],
+        "worst overshoot")
+    close_value(checks["settling time"]["value"], max(s["settling_time"] for s in steps), "settling")
+    close_value(checks["settling time"]["limit"], spec["max_settling_time"], "settling limit")
+    close_value(checks["steady-state error"]["value"], max(
+        s["steady_state_error"] for s in segs if s["kind"] in ("step", "hold")), "sse")
+    close_value(checks["ramp tracking error"]["value"], m["ramp_error_max"], "ramp")
+    close_value(checks["command saturation"]["value"], 100 * m["saturation_fraction"], "sat %")
+    close_value(checks["command saturation"]["limit"], 100 * spec["max_saturation"], "sat limit")
+    close_value(checks["min chamber pressure"]["value"], m["p_min"], "p_min check")
+    close_value(checks["min chamber pressure"]["limit"], p_atm - spec["pressure_tolerance"], "p lo")
+    close_value(checks["max chamber pressure"]["value"], m["p_max"], "p_max check")
+    close_value(checks["max chamber pressure"]["limit"], p_s + spec["pressure_tolerance"], "p hi")
+    assert v["passed"] is all(c["passed"] for c in v["checks"])
+    return v
+
+
+def check_figures(f, v, df, air_bound=None):
+    """A ``compare.run_figures`` dict against the CSV and the validation ``v`` of the same
+    run. Without ``q_supply`` in the CSV the air is bounded instead (``air_bound``, kg)."""
+    t, x, u, r = (df[c].to_numpy() for c in ("t", "x", "u", "r"))
+    e = np.abs(r - x)
+    segs = v["segments"]
+    settled = np.ones(len(t), dtype=bool)
+    for s in segs:
+        if s["kind"] == "step":
+            settled &= ~((t >= s["start"]) & (t < s["start"] + 0.5))
+    steps = [s for s in segs if s["kind"] == "step"]
+    fin = lambda vals: max((q for q in vals if not math.isnan(q)), default=math.nan)  # noqa: E731
+    close_value(f["iae"], v["metrics"]["iae"], "iae")
+    close_value(f["max_error"], e.max(), "max_error")
+    close_value(f["max_error_settled"], e[settled].max(), "max_error_settled")
+    close_value(f["settling_time"], fin(s["settling_time"] for s in steps), "settling_time")
+    close_value(f["overshoot"], fin(s["overshoot"] for s in steps), "overshoot")
+    close_value(f["overshoot_abs"], fin(s["overshoot_abs"] for s in steps), "overshoot_abs")
+    close_value(f["steady_state_error"], fin(s["steady_state_error"] for s in segs
+                                        if s["kind"] in ("step", "hold")), "sse")
+    close_value(f["ramp_error"], v["metrics"]["ramp_error_max"], "ramp_error")
+    if "q_supply" in df:
+        close_value(f["air_kg"], trapezoid(df["q_supply"].to_numpy(), t), "air_kg")
+    else:
+        assert 0.0 < f["air_kg"] < air_bound
+    close_value(f["air_l_anr"], f["air_kg"] / RHO_ANR_KG_M3 * 1e3, "air_l_anr")
+    # u is held between control samples: its total variation over the output grid is
+    # that over the control samples
+    close_value(f["command_activity"], np.sum(np.abs(np.diff(u))) / (t[-1] - t[0]), "activity",
+           rel=1e-6)
+    close_value(f["saturation"], v["metrics"]["saturation_fraction"], "saturation")
+    for k, arr in (("u", u), ("x", x)):
+        close_value(f[f"{k}_min"], arr.min(), k + "_min")
+        close_value(f[f"{k}_max"], arr.max(), k + "_max")
+    close_value(f["p_min"], v["metrics"]["p_min"], "p_min")
+    close_value(f["p_max"], v["metrics"]["p_max"], "p_max")
+    assert f["passed"] is v["passed"]
+    assert f["failed"] == [c["name"] for c in v["checks"] if not c["passed"]]

@@ -103,6 +103,18 @@ CORE_REP = ("tests/test_replay.py",) + _NEW
 CORE_VAL = ("tests/test_validate.py",) + _NEW
 CORE_INT = ("tests/test_integrate.py",) + _NEW
 CORE_KER = ("tests/test_maps.py", "tests/test_limits.py") + _NEW
+#: Issue-17 remainder (p17): the values written to JSON and the design summaries.
+GREY_VAL = ("tests/test_grey_box.py::test_integration_error_recomputed_with_scipy_radau",
+            "tests/test_grey_box.py::test_correlation_and_std_from_a_finite_difference_jacobian",
+            "tests/test_grey_box.py::test_json_values_recomputed_from_their_definitions")
+LIN_VAL = ("tests/test_json_values.py::test_linearize_residual_recomputed_from_f",
+           "tests/test_linearize.py")
+#: one quick design (the NMPC one: PD saturates there, so every figure is non-trivial)
+DESIGN_VAL = ("tests/test_designs.py::test_nmpc_design_every_key",)
+JIT = ("tests/test_integrate.py", "tests/test_simulate.py::test_compiled_loop_native_matches_vm",
+       "tests/test_simulate.py::test_compiled_loop_without_compiler_runs_the_vm")
+OUTPUT = ("tests/test_output.py",
+          "tests/test_simulate.py::test_result_set_refuses_an_input_however_its_path_is_spelled")
 
 
 def _m(name, group, file, original, replacement, description, tests):
@@ -624,6 +636,66 @@ MUTATIONS: tuple[Mutation, ...] = (
     _m("kernel-integral-t", "core", "workbench/stability/kernel.py",
        "Acl[:, c, 0] = -T * cx", "Acl[:, c, 0] = -cx",
        "closed-loop kernel: integral state without the sample time", CORE_KER),
+    # ------------------------------------------- issue 17 remainder: JSON values (p17)
+    _m("greybox-interr-nominal-params", "identify", "workbench/identify/grey_box/estimate.py",
+       "anchors[0], params=p_hat, anchors=anchors, every=M)",
+       "anchors[0], params=None, anchors=anchors, every=M)",
+       "grey-box integration error: CVODES with the nominal, not the estimated, parameters",
+       GREY_VAL),
+    _m("greybox-interr-anchor-shift", "identify", "workbench/identify/grey_box/estimate.py",
+       "anchors = s_nodes[d.first:d.first + d.n_int] * prob.sc",
+       "anchors = np.roll(s_nodes[d.first:d.first + d.n_int], -1, axis=0) * prob.sc",
+       "grey-box integration error: each interval started from the next node", GREY_VAL),
+    _m("greybox-corr-optimiser-units", "identify", "workbench/identify/grey_box/covariance.py",
+       "corr = cov / np.outer(std, std)", "corr = cov_z / np.outer(std, std)",
+       "grey-box correlation from the optimiser-unit covariance over parameter-unit stds",
+       GREY_VAL),
+    _m("greybox-cov-unit-variance", "identify", "workbench/identify/grey_box/covariance.py",
+       "var[rows] = np.mean(r[rows] ** 2) / dof", "var[rows] = 1.0 / dof",
+       "grey-box covariance assumes the normalised residuals have unit variance", GREY_VAL),
+    _m("equilibrium-residual-norm", "core", "workbench/equilibrium.py",
+       "return sol.x, float(np.max(np.abs(np.asarray(resfun(sol.x)[0]).ravel()[:n_eq])))",
+       "return sol.x, float(np.linalg.norm(np.asarray(resfun(sol.x)[0]).ravel()[:n_eq]))",
+       "equilibrium residual: 2-norm of the rows instead of the largest row", LIN_VAL),
+    _m("compare-air-anr-density", "core", "workbench/compare.py",
+       '"air_l_anr": air_kg / RHO_ANR * 1e3,', '"air_l_anr": air_kg * RHO_ANR * 1e3,',
+       "figures: litres ANR multiplied by the density instead of divided", DESIGN_VAL),
+    _m("compare-activity-per-sample", "core", "workbench/compare.py",
+       "float(np.sum(np.abs(np.diff(u_s))) / duration)",
+       "float(np.sum(np.abs(np.diff(u_s))) / len(u_s))",
+       "figures: command activity per sample instead of per second", DESIGN_VAL),
+    _m("compare-settled-unmasked", "core", "workbench/compare.py",
+       '"max_error_settled": float(np.max(e[settled])) if settled.any() else math.nan,',
+       '"max_error_settled": float(np.max(e)) if settled.any() else math.nan,',
+       "figures: the settled error taken over the whole run", DESIGN_VAL),
+    _m("validate-saturation-count", "core", "workbench/validate.py",
+       "sat_frac = float(np.sum(dt * sat[:-1]) / (t[-1] - t[0]))",
+       "sat_frac = float(np.mean(sat))",
+       "saturation share counted over samples instead of held time", DESIGN_VAL),
+    _m("jit-cache-hit-flag", "core", "workbench/integrate/jit.py",
+       "        return target, True", "        return target, False",
+       "JIT cache: a hit reported as a fresh build", JIT),
+    _m("jit-no-compiler-raises", "core", "workbench/integrate/jit.py",
+       "    if not have_compiler():\n        return fun",
+       "    if not have_compiler():\n        raise CompileError('no C compiler found')",
+       "JIT: no compiler is an error instead of the virtual machine", JIT),
+    _m("compiled-loop-error-lost", "core", "workbench/bench/compiled_loop.py",
+       "self._native, self.native_error = False, str(exc)",
+       "self._native, self.native_error = False, None",
+       "compiled loop: the reason the C loop is not used is lost", JIT),
+    _m("output-not-input-unresolved", "core", "workbench/output.py",
+       "ins[Path(p).resolve()] = p", "ins[Path(p)] = p",
+       "check_not_input compares input paths unresolved (./x, symlinks, relative)", OUTPUT),
+    _m("output-not-input-staged-paths", "core", "workbench/output.py",
+       "check_not_input([out_abs / p.relative_to(stage) for p in files], inputs)",
+       "check_not_input(files, inputs)",
+       "result_set checks the staged paths, not their destinations, against the inputs", OUTPUT),
+    _m("output-stage-over-existing", "core", "workbench/output.py",
+       "        if not out_abs.exists():", "        if True:",
+       "result_set renames the stage over an existing folder", OUTPUT),
+    _m("output-stage-left-behind", "core", "workbench/output.py",
+       "        if stage.exists():", "        if stage.exists() and False:",
+       "result_set leaves the hidden staging folder behind on failure", OUTPUT),
 )
 
 

@@ -298,3 +298,26 @@ def test_pid_law_float_and_sx_agree():
         u_sx, i_sx = (float(v) for v in law(ek, e_prev, state[1]))
         state, u_f = c.update(state, ek, {"x": 0.0})
         assert u_f == u_sx and state[1] == i_sx
+
+
+def test_result_set_refuses_an_input_however_its_path_is_spelled(tmp_path, monkeypatch):
+    # workbench.output (the result sets of simulate and the other commands): an input
+    # named relative to the working folder, through "..", or through a symlink is the
+    # same file as the output of that name; it is refused and left as it was.
+    from workbench.output import check_not_input, result_set
+    out = tmp_path / "run"
+    out.mkdir()
+    rec = out / "simulation.csv"
+    rec.write_text("t,x\n0,0\n")
+    (tmp_path / "link").symlink_to(out, target_is_directory=True)
+    monkeypatch.chdir(tmp_path)
+    for spelled in ("run/simulation.csv", "run/../run/simulation.csv", "link/simulation.csv"):
+        with pytest.raises(InputError, match="overwrite the input"):
+            with result_set(out, inputs=[spelled]) as stage:
+                (stage / "simulation.csv").write_text("t,x\n0,1\n")
+        assert rec.read_text() == "t,x\n0,0\n", spelled
+        with pytest.raises(InputError, match="would overwrite the input " + spelled):
+            check_not_input([out / "simulation.csv"], [spelled])
+    # a different file of the same name elsewhere is not an input of this folder
+    check_not_input([out / "simulation.csv"], ["other/simulation.csv", None])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "run"]   # no stage left
