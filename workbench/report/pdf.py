@@ -246,7 +246,7 @@ def _col_widths(cells: list[list[str]], fonts: list[list[str]], size: float,
             lines = text.split("\n") or [""]
             wid = max(pdfmetrics.stringWidth(ln, font, size) for ln in lines)
             natural[j] = max(natural[j], wid)
-            words = text.split() or [""]
+            words = text.split(" ")  # not at no-break spaces (formulas, 10 ms)
             soft[j] = max(soft[j], max(pdfmetrics.stringWidth(w, font, size) for w in words))
             if i >= n_head and kinds[j] in ("num", "nowrap"):
                 hard[j] = max(hard[j], wid)
@@ -304,18 +304,17 @@ def _base_table_style(n_head: int, n_rows: int) -> list:
 
 
 def _table(it: Item, st: _Styles) -> list:
-    b: Table = it.block
-    kinds = b.column_kinds()
-    texts = b.formatted_rows()
-    has_units = b.units is not None and any(b.units)
-    units = [f"[{u}]" if u else "" for u in b.units] if has_units else []
-    head_txt = [list(b.columns)] + ([units] if has_units else [])
+    v = it.block.view()
+    kinds = v.kinds
+    has_units = v.units is not None and any(v.units)
+    units = [f"[{u}]" if u else "" for u in v.units] if has_units else []
+    head_txt = [list(v.columns)] + ([units] if has_units else [])
     head_fonts = [[st.bold] * len(kinds)] + ([[st.sans] * len(kinds)] if has_units else [])
-    body_fonts = [[st.bold if _is_bool(v) else st.sans for v in row] for row in b.rows]
+    body_fonts = [[st.bold if _is_bool(x) else st.sans for x in row] for row in v.values]
     # Wide tables: a smaller font before splitting words, and before splitting numbers.
     best = None
     for size in TABLE_FONT_SIZES:
-        widths, fit = _col_widths(head_txt + [list(r) for r in texts], head_fonts + body_fonts,
+        widths, fit = _col_widths(head_txt + [list(r) for r in v.texts], head_fonts + body_fonts,
                                   size, kinds, FRAME_W, fill=1.0, n_head=len(head_txt))
         if best is None or fit > best[2]:
             best = (size, widths, fit)
@@ -323,11 +322,11 @@ def _table(it: Item, st: _Styles) -> list:
             break
     size, widths, _ = best
     cell, hd, un = st.sized(size)
-    head = [[RLParagraph(_esc(c), hd[k]) for c, k in zip(b.columns, kinds)]]
+    head = [[RLParagraph(_esc(c), hd[k]) for c, k in zip(v.columns, kinds)]]
     if has_units:
         head.append([RLParagraph(_esc(u), un[k]) for u, k in zip(units, kinds)])
-    body = [[RLParagraph(_cell_markup(t, v), cell[k]) for t, v, k in zip(row_t, row_v, kinds)]
-            for row_t, row_v in zip(texts, b.rows)]
+    body = [[RLParagraph(_cell_markup(t, x), cell[k]) for t, x, k in zip(row_t, row_v, kinds)]
+            for row_t, row_v in zip(v.texts, v.values)]
     style = _base_table_style(len(head), len(body))
     for j in range(1, len(kinds)):  # air between a number and the text to its right
         if kinds[j - 1] == "num" and kinds[j] != "num":
