@@ -157,6 +157,16 @@ def test_numbers_given_as_text_share_the_column_format(tmp_path):
     assert "passed" not in html.lower().replace("design", "")
 
 
+def test_numbers_with_a_verdict_after_them(tmp_path):
+    # fl_position's check table: "8.6447 FAIL", "inf FAIL" next to plain numbers
+    col = ["4.875", "0.0018710", "inf FAIL", "8.6447 failed", "0.87706"]
+    html_path, _ = write(tmp_path, [rp.Section("s", [rp.Table(["FL full"], [[c] for c in col])])])
+    _, *body = html_tables(html_path)[0]
+    texts = [r[0] for r in body]
+    assert column_style([t.replace(" FAIL", "") for t in texts]) == ("fixed", 6)
+    assert texts[2] == "inf FAIL" and texts[3] == "8.644700 FAIL"
+
+
 def test_integer_columns_in_full_and_text_columns_untouched(tmp_path):
     rows = [["a 1.5 b", 1, 123456789, "3.11"], ["PD try 2", 20, 3, "2.4.6"]]
     html_path, _ = write(tmp_path, [rp.Section("s", [rp.Table(["name", "n", "big", "v"], rows)])])
@@ -215,3 +225,118 @@ def test_headers_do_not_break_inside_formulas(tmp_path):
         assert f in lines, (f, lines)
     html = html_path.read_text(encoding="utf-8")
     assert "max\u00a0|x\u00a0-\u00a0x_r|" in html or "max&nbsp;|x&nbsp;-&nbsp;x_r|" in html
+
+
+# --------------------------------------------------------------------------- page fill
+
+def page_fill(pdf_path: Path) -> list[float]:
+    """Per page: fraction of the text frame's height above the lowest thing drawn.
+
+    Every text, image and path object of the page inside the text frame (A4,
+    20 mm top and 18 mm bottom margins: the header and footer lie outside) is
+    measured with pypdfium2; 1.0 is a page filled to the bottom margin.
+    """
+    import pypdfium2 as pdfium
+    from workbench.report import pdf as rp_pdf
+
+    bottom = rp_pdf.MARGIN_BOTTOM
+    top = rp_pdf.PAGE[1] - rp_pdf.MARGIN_TOP
+    fills = []
+    pdf = pdfium.PdfDocument(str(pdf_path))
+    for i in range(len(pdf)):
+        lows = [obj.get_bounds()[1] for obj in pdf[i].get_objects(max_depth=2)
+                if bottom - 2 <= obj.get_bounds()[1] and obj.get_bounds()[3] <= top + 2]
+        fills.append((top - min(lows)) / (top - bottom) if lows else 0.0)
+    pdf.close()
+    return fills
+
+
+def _figure(height_in: float, label: str):
+    fig, ax = plt.subplots(figsize=(7.0, height_in))
+    ax.plot([0, 1], [0, 1])
+    ax.set_title(label)
+    return fig
+
+
+LOREM = ("The loop runs on the full nonlinear model of the rig, sampled at T, with the "
+         "command clipped to the valve range; each item is judged on its worst segment. ")
+
+
+def _pdf_pages_text(pdf_path: Path) -> list[str]:
+    return [p.extract_text().replace("\u00a0", " ") for p in PdfReader(pdf_path).pages]
+
+
+@pytest.fixture(scope="module")
+def flow_pdf(tmp_path_factory):
+    """Text to mid-page, then a tall figure, a long table and an oversized figure."""
+    blocks = [rp.Paragraph(LOREM * 9)]
+    blocks += [rp.Heading("Tall figure"), rp.Figure(_figure(6.5, "tall"), "tall figure")]
+    blocks += [rp.Paragraph(LOREM * 6)]
+    blocks += [rp.Table(["position x", "pressure p"], [[0.01 * i, 0.02 * i + 1]
+                                                       for i in range(70)],
+                        caption="long table", units=["m", "bar"])]
+    blocks += [rp.Paragraph(LOREM * 4), rp.Heading("Huge figure"),
+               rp.Figure(_figure(9.0, "huge"), "huge figure")]
+    blocks += [rp.Paragraph(f"after the huge figure, block {k}. " + LOREM) for k in range(4)]
+    blocks += [rp.Heading("End"), rp.Paragraph("the end")]
+    out = tmp_path_factory.mktemp("flow")
+    _, pdf_path = rp.write(rp.Report("flow", sections=[rp.Section("s", blocks)]), out)
+    return pdf_path
+
+
+def test_no_page_is_left_more_than_40_percent_empty(flow_pdf):
+    fills = page_fill(flow_pdf)
+    # the rule: before a figure or table that did not fit, at most 40 % of a page
+    # is empty; the last page ends where the text ends
+    assert all(f >= 0.6 for f in fills[:-1]), [round(f, 2) for f in fills]
+    assert len(fills) <= 6
+
+
+def test_flow_keeps_every_block_and_the_reading_order(flow_pdf):
+    pages = _pdf_pages_text(flow_pdf)
+    flat = re.sub(r"\s+", " ", " ".join(pages))
+    for cap in ("Figure 1: tall figure", "Figure 2: huge figure", "Table 1: long table"):
+        assert flat.count(cap) == 1, cap
+    # every row of the long table is drawn once (x = 0 .. 0.69 m), split where a
+    # page ends: its header once on each page it is on, on consecutive pages
+    assert all(flat.count(f" {0.01 * i:.2f} ") == 1 for i in range(1, 70))
+    heads = [p.count("position x") for p in pages]
+    on = [i for i, n in enumerate(heads) if n]
+    assert set(heads) <= {0, 1} and len(on) >= 2 and on == list(range(on[0], on[-1] + 1))
+    # headings stay in the contents and in order
+    assert flat.index("1.1 Tall figure") < flat.index("1.2 Huge figure") < flat.index("1.3 End")
+    # the huge figure waits for the top of a page; the blocks after it that fit
+    # fill the page before it, in their own order
+    huge = next(i for i, p in enumerate(pages) if "Figure 2: huge figure" in p)
+    after = [next(i for i, p in enumerate(pages) if f"block {k}." in p) for k in range(4)]
+    assert after == sorted(after) and after[0] <= huge
+
+
+def test_figure_shrinks_into_the_rest_of_a_page(tmp_path):
+    import pypdfium2 as pdfium
+    blocks = [rp.Paragraph(LOREM * 9), rp.Figure(_figure(6.0, "f"), "f")]
+    _, pdf_path = write(tmp_path, [rp.Section("s", blocks)])
+    pdf = pdfium.PdfDocument(str(pdf_path))
+    assert len(pdf) == 1                      # it shrank instead of taking a second page
+    images = [o for o in pdf[0].get_objects(max_depth=2)
+              if o.type == pdfium.raw.FPDF_PAGEOBJ_IMAGE]
+    left, _, right, _ = images[0].get_bounds()
+    from workbench.report import pdf as rp_pdf
+    scale = (right - left) / rp_pdf.FRAME_W
+    assert 0.5 <= scale < 0.999, scale        # MIN_SCALE <= scale < full width
+    pdf.close()
+
+
+def test_blocks_taller_than_a_page_still_flow(tmp_path):
+    # a key-value list and a table longer than a page, right under their
+    # headings, and a figure straight after a full page: nothing lost, no error
+    kv = rp.KeyValues([(f"item {i}", 0.5 * i, "m") for i in range(90)])
+    table = rp.Table(["row", "value"], [[f"r{i}", 1.0 + i] for i in range(120)])
+    blocks = [rp.Heading("list"), kv, rp.Heading("table"), table,
+              rp.Figure(_figure(8.0, "after"), "after the table")]
+    _, pdf_path = write(tmp_path, [rp.Section("s", blocks)])
+    flat = re.sub(r"\s+", " ", " ".join(_pdf_pages_text(pdf_path)))
+    assert all(f"item {i} " in flat for i in range(90))
+    assert all(f" r{i} " in flat for i in range(120))
+    assert "Figure 1: after the table" in flat
+    assert all(f >= 0.6 for f in page_fill(pdf_path)[:-1])

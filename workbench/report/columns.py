@@ -12,8 +12,9 @@ Rules the renderers share (both :mod:`.html` and :mod:`.pdf` use them, through
   column of whole numbers stays ``100, 30, 5``. A column of integers is shown
   in full.
 * **Numbers given as text are numbers.** A text cell that is just a number
-  (``"0.00084788"``, ``"<= 16.75"``, ``"inf"``) is formatted with its column, so a
-  design that formatted values itself still gets one format per column.
+  (``"0.00084788"``, ``"<= 16.75"``, ``"inf"``, ``"8.6447 FAIL"``) is formatted
+  with its column, so a design that formatted values itself still gets one
+  format per column.
 * **One status vocabulary.** ``PASS``/``FAIL`` (and ``NOTE``/``ERROR`` in
   banners); ``"passed"``, ``"PASSED"``, ``"fail"``, ``"FAILED"`` ... are accepted and
   shown as ``PASS``/``FAIL``.
@@ -48,7 +49,8 @@ NBSP = "\u00a0"
 
 _PLACEHOLDERS = {"", "-", "\u2013", "\u2014", "n/a", "na", "nan"}
 _NUMBER = re.compile(r"^(?P<pre>(?:<=|>=|<|>|\u2264|\u2265|~|\u2248|=)\s*)?"
-                     r"(?P<num>[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?inf)$")
+                     r"(?P<num>[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?inf)"
+                     r"(?P<post>\s+(?:pass|passed|fail|failed))?$", re.IGNORECASE)
 
 
 def _is_bool(value: Any) -> bool:
@@ -75,15 +77,16 @@ def is_empty(value: Any) -> bool:
     return False
 
 
-def number_text(value: Any) -> tuple[str, float | int] | None:
-    """``(prefix, number)`` when ``value`` is a number or a text that is just one.
+def number_text(value: Any) -> tuple[str, float | int, str] | None:
+    """``(prefix, number, suffix)`` when ``value`` is a number or a text that is one.
 
     The prefix is a relation written before the number (``"<= "``), kept as
-    typed. Integers (not bool) stay ``int``; numeric text with a decimal point or
-    an exponent becomes ``float``, plain digits ``int``.
+    typed; the suffix a verdict after it (``"8.64 failed"``), shown as
+    ``" FAIL"``. Integers (not bool) stay ``int``; numeric text with a decimal
+    point or an exponent becomes ``float``, plain digits ``int``.
     """
     if isinstance(value, numbers.Real) and not _is_bool(value):
-        return "", value if isinstance(value, numbers.Integral) else float(value)
+        return "", value if isinstance(value, numbers.Integral) else float(value), ""
     if not isinstance(value, str):
         return None
     m = _NUMBER.match(value.strip())
@@ -91,7 +94,8 @@ def number_text(value: Any) -> tuple[str, float | int] | None:
         return None
     num = m.group("num")
     number = int(num) if re.fullmatch(r"[+-]?\d+", num) else float(num)
-    return m.group("pre") or "", number
+    post = m.group("post")
+    return m.group("pre") or "", number, " " + status_word(post) if post else ""
 
 
 def _decade(x: float, digits: int) -> int:
@@ -208,7 +212,7 @@ def _column_texts(cells: list, digits: int) -> tuple[list[str], list[Any]]:
             texts.append(word)
             values.append(word == "PASS")
         elif n is not None:
-            texts.append(n[0] + fmt(n[1]))
+            texts.append(n[0] + fmt(n[1]) + n[2])
             values.append(None if texts[-1] == "n/a" else c)
         elif is_empty(c):
             shown = "" if c is None else str(c).strip()

@@ -20,11 +20,12 @@ from reportlab.lib.styles import ParagraphStyle
 from reportlab.lib.units import mm
 from reportlab.pdfbase import pdfmetrics
 from reportlab.pdfgen import canvas as rl_canvas
-from reportlab.platypus import (BaseDocTemplate, Frame, Image, KeepTogether, PageTemplate,
+from reportlab.platypus import (BaseDocTemplate, Frame, Image, PageTemplate,
                                 Paragraph as RLParagraph, Preformatted as RLPreformatted,
                                 Spacer, Table as RLTable, TableStyle)
 from reportlab.platypus.tableofcontents import TableOfContents
 
+from .pdf_flow import KeepGroup, float_figures
 from .document import (Figure, Heading, Item, KeyValues, Paragraph, Preformatted, Report,
                        ReportError, Status, Table, _is_bool, outline)
 
@@ -206,6 +207,12 @@ class _Doc(BaseDocTemplate):
                       leftPadding=0, rightPadding=0, topPadding=0, bottomPadding=0)
         self.addPageTemplates([PageTemplate(id="page", frames=[frame])])
 
+    def handle_flowable(self, flowables):  # noqa: D102 - reportlab API
+        frame = getattr(self, "frame", None)
+        if frame is not None:
+            float_figures(flowables, frame, self.canv, FRAME_H)
+        super().handle_flowable(flowables)
+
     def afterFlowable(self, flowable):  # noqa: N802 - reportlab API
         toc = getattr(flowable, "_wb_toc", None)
         if toc is None:
@@ -333,7 +340,8 @@ def _table(it: Item, st: _Styles) -> list:
             style.append(("LEFTPADDING", (j, 0), (j, -1), 3 * CELL_PAD))
     table = RLTable(head + body, colWidths=widths, repeatRows=len(head), hAlign="LEFT",
                     style=TableStyle(style))
-    return [RLParagraph(_caption_markup(it), st.caption), table, Spacer(1, 8)]
+    return [KeepGroup([RLParagraph(_caption_markup(it), st.caption)], table, [Spacer(1, 8)],
+                      FRAME_H)]
 
 
 def _caption_markup(it: Item) -> str:
@@ -355,8 +363,8 @@ def _key_values(b: KeyValues, st: _Styles) -> list:
     widths, _ = _col_widths(txt, fonts, st.cell["text"].fontSize, ("nowrap", "text"),
                             FRAME_W, fill=0.55)
     style = _base_table_style(0, len(rows)) + [("LINEABOVE", (0, 0), (-1, 0), 1.0, INK)]
-    return [RLTable(rows, colWidths=widths, hAlign="LEFT", style=TableStyle(style)),
-            Spacer(1, 8)]
+    return [KeepGroup([], RLTable(rows, colWidths=widths, hAlign="LEFT", style=TableStyle(style)),
+                      [Spacer(1, 8)], FRAME_H)]
 
 
 def _figure(it: Item, st: _Styles) -> list:
@@ -370,7 +378,7 @@ def _figure(it: Item, st: _Styles) -> list:
     img = Image(io.BytesIO(b.image), width=w, height=h)
     img.hAlign = "CENTER"
     cap = RLParagraph(_caption_markup(it), st.fig_caption)
-    return [KeepTogether([Spacer(1, 4), img, cap])]
+    return [KeepGroup([Spacer(1, 4)], img, [cap], FRAME_H, png=b.image)]
 
 
 def _banner(b: Status, st: _Styles) -> list:
@@ -418,19 +426,20 @@ def _item(it: Item, st: _Styles) -> list:
 
 
 def _glue(story: list) -> list:
-    """Put headings and captions (keepWithNext) into a following KeepTogether.
+    """Put headings and captions (keepWithNext) into the lead of a following group.
 
     reportlab keeps a keepWithNext flowable with the next one only if that is
     not itself a container, so a heading before a figure could be left alone at
-    the foot of a page; merging them into the figure's KeepTogether fixes that.
+    the foot of a page; the group (:class:`.pdf_flow.KeepGroup`) keeps them with
+    the figure, or with the first rows of a table.
     """
     out: list = []
     pending: list = []
     for f in story:
-        if isinstance(f, KeepTogether) and pending:
-            out.append(KeepTogether(pending + list(f._content)))
+        if isinstance(f, KeepGroup) and pending:
+            out.append(f.with_lead(pending))
             pending = []
-        elif getattr(f, "getKeepWithNext", lambda: False)() and not isinstance(f, KeepTogether):
+        elif getattr(f, "getKeepWithNext", lambda: False)() and not isinstance(f, KeepGroup):
             pending.append(f)
         else:
             out += pending
