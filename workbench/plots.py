@@ -83,7 +83,7 @@ def replay_figure(rec, sim, fits: Mapping[str, float], path: str | os.PathLike,
 
 # ---------------------------------------------------------------------- validation
 def _validation_title(v) -> str:
-    verdict = "PASSED" if v.passed else "FAILED: " + ", ".join(c.name for c in v.failed)
+    verdict = "PASS" if v.passed else "FAIL: " + ", ".join(c.name for c in v.failed)
     return f"{v.label} -- {verdict}" if v.label else verdict
 
 

@@ -23,6 +23,7 @@ from typing import Any, Iterable, Mapping, Sequence, Union
 import numpy as np
 
 from ..errors import WorkbenchError
+from .columns import STATUS_WORDS, TableView, table_view
 
 __all__ = [
     "ReportError", "Report", "Section", "Heading", "Paragraph", "KeyValues", "Table",
@@ -31,6 +32,9 @@ __all__ = [
 
 #: Allowed outcomes of a :class:`Status` banner, in order of severity.
 OUTCOMES = ("PASS", "NOTE", "FAIL", "ERROR")
+
+#: Other spellings accepted for an outcome, and the outcome shown.
+_OUTCOME_ALIASES = {k.upper(): v for k, v in STATUS_WORDS.items()}
 
 #: Default resolution of figures rendered from matplotlib, dots per inch.
 FIGURE_DPI = 170
@@ -128,6 +132,11 @@ def _strip(text: str) -> str:
     return "0" if text in ("-0", "") else text
 
 
+def _canonical(text: str) -> str:
+    """A verdict word in the one vocabulary (``"PASSED"`` -> ``"PASS"``), other text as is."""
+    return STATUS_WORDS.get(text.strip().lower(), text)
+
+
 def _text(value: Any, what: str) -> str:
     if not isinstance(value, str):
         raise ReportError(f"{what} must be text, got {type(value).__name__} {value!r}")
@@ -210,7 +219,8 @@ class Status(Block):
     Parameters
     ----------
     outcome : {"PASS", "NOTE", "FAIL", "ERROR"}
-        ``PASS`` green, ``FAIL`` red, ``ERROR`` dark red (the design did not run to
+        Case-insensitive; ``"PASSED"``/``"FAILED"`` are accepted and shown as
+        ``PASS``/``FAIL`` (one vocabulary in every report). ``PASS`` green, ``FAIL`` red, ``ERROR`` dark red (the design did not run to
         the end), ``NOTE`` grey-blue (information only).
     message : str
         What passed or what failed, e.g. ``"design failed at step 'gain limits':
@@ -221,7 +231,8 @@ class Status(Block):
     message: str = ""
 
     def __post_init__(self) -> None:
-        outcome = _text(self.outcome, "Status outcome").upper()
+        outcome = _text(self.outcome, "Status outcome").strip().upper()
+        outcome = _OUTCOME_ALIASES.get(outcome, outcome)
         if outcome not in OUTCOMES:
             raise ReportError(f"Status outcome must be one of {', '.join(OUTCOMES)}, "
                               f"got {self.outcome!r}")
@@ -264,7 +275,7 @@ class KeyValues(Block):
     def formatted(self) -> tuple[tuple[str, str, Cell], ...]:
         """``(label, text, value)`` for each item, the text formatted with :func:`fmt`."""
         return tuple((label, ("yes" if value else "no") if _is_bool(value)
-                      else fmt(value, unit, self.digits), value)
+                      else _canonical(fmt(value, unit, self.digits)), value)
                      for label, value, unit in self.items)
 
 
@@ -278,8 +289,12 @@ class Table(Block):
         Column headings.
     rows : sequence of sequences
         One sequence per row, as many cells as columns. A cell is a float or int
-        (formatted with :func:`fmt`, right-aligned), a str, a bool (shown as a
-        green PASS or red FAIL) or None (``n/a``).
+        (right-aligned), a str, a bool (shown as a green PASS or red FAIL) or None
+        (``n/a``). The numbers of a column share one format, chosen from all of
+        them (:func:`.columns.column_format`); text that is just a number
+        (``"0.0012"``, ``"<= 16.75"``) counts as a number, verdict words
+        (``"passed"``, ``"FAILED"``) as PASS/FAIL, and a column with no value in
+        any row is not shown (see :meth:`view`).
     caption : str, optional
         Caption shown above the table as ``Table n: caption``.
     units : sequence of str or None, optional
@@ -321,25 +336,21 @@ class Table(Block):
         object.__setattr__(self, "caption", _optional_text(self.caption, "Table caption"))
 
     def column_kinds(self) -> tuple[str, ...]:
-        """``"num"``, ``"status"`` or ``"text"`` per column (decides the alignment).
-
-        A column is numeric when every cell that is not None is a number, a status
-        column when every such cell is a bool, text otherwise.
-        """
-        kinds = []
-        for j in range(len(self.columns)):
-            cells = [r[j] for r in self.rows if r[j] is not None]
-            if cells and all(_is_number(c) for c in cells):
-                kinds.append("num")
-            elif cells and all(_is_bool(c) for c in cells):
-                kinds.append("status")
-            else:
-                kinds.append("text")
-        return tuple(kinds)
+        """``"num"``, ``"status"`` or ``"text"`` per column (all columns, see :meth:`view`)."""
+        return table_view(self.columns, self.units, self.rows, self.digits, False).kinds
 
     def formatted_rows(self) -> tuple[tuple[str, ...], ...]:
-        """Cell texts, formatted with :func:`fmt` (units are in the header, not the cells)."""
-        return tuple(tuple(fmt(v, None, self.digits) for v in row) for row in self.rows)
+        """Cell texts of all columns, one number format per column (see :meth:`view`)."""
+        return table_view(self.columns, self.units, self.rows, self.digits, False).texts
+
+    def view(self) -> TableView:
+        """What the renderers show: columns with a value, kinds, one format per column.
+
+        Columns whose cells are all empty (None, NaN, ``""``, ``"-"``, ``"n/a"``)
+        are dropped, unless every column is; headers keep formulas and number-unit
+        pairs on one line (:func:`.columns.keep_formulas`).
+        """
+        return table_view(self.columns, self.units, self.rows, self.digits)
 
 
 @dataclass(frozen=True)

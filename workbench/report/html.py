@@ -207,14 +207,14 @@ def _item(it: Item) -> dict:
                 for label, text, value in b.formatted()]
         return {"kind": "kv", "rows": rows}
     if isinstance(b, Table):
-        kinds = b.column_kinds()
+        v = b.view()
         units = None
-        if b.units is not None and any(b.units):
-            units = [{"text": f"[{u}]" if u else "", "cls": k} for u, k in zip(b.units, kinds)]
-        rows = [[_cell(t, v, k) for t, v, k in zip(texts, values, kinds)]
-                for texts, values in zip(b.formatted_rows(), b.rows)]
+        if v.units is not None and any(v.units):
+            units = [{"text": f"[{u}]" if u else "", "cls": k} for u, k in zip(v.units, v.kinds)]
+        rows = [[_cell(t, x, k) for t, x, k in zip(texts, values, v.kinds)]
+                for texts, values in zip(v.texts, v.values)]
         return {"kind": "table", "anchor": it.anchor, "label": it.label, "caption": b.caption,
-                "columns": [{"text": c, "cls": k} for c, k in zip(b.columns, kinds)],
+                "columns": [{"text": c, "cls": k} for c, k in zip(v.columns, v.kinds)],
                 "units": units, "rows": rows}
     if isinstance(b, Figure):
         return {"kind": "figure", "anchor": it.anchor, "label": it.label, "caption": b.caption,

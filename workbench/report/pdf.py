@@ -20,11 +20,12 @@ from reportlab.lib.styles import ParagraphStyle
 from reportlab.lib.units import mm
 from reportlab.pdfbase import pdfmetrics
 from reportlab.pdfgen import canvas as rl_canvas
-from reportlab.platypus import (BaseDocTemplate, Frame, Image, KeepTogether, PageTemplate,
+from reportlab.platypus import (BaseDocTemplate, Frame, Image, PageTemplate,
                                 Paragraph as RLParagraph, Preformatted as RLPreformatted,
                                 Spacer, Table as RLTable, TableStyle)
 from reportlab.platypus.tableofcontents import TableOfContents
 
+from .pdf_flow import KeepGroup, float_figures
 from .document import (Figure, Heading, Item, KeyValues, Paragraph, Preformatted, Report,
                        ReportError, Status, Table, _is_bool, outline)
 
@@ -206,6 +207,12 @@ class _Doc(BaseDocTemplate):
                       leftPadding=0, rightPadding=0, topPadding=0, bottomPadding=0)
         self.addPageTemplates([PageTemplate(id="page", frames=[frame])])
 
+    def handle_flowable(self, flowables):  # noqa: D102 - reportlab API
+        frame = getattr(self, "frame", None)
+        if frame is not None:
+            float_figures(flowables, frame, self.canv, FRAME_H)
+        super().handle_flowable(flowables)
+
     def afterFlowable(self, flowable):  # noqa: N802 - reportlab API
         toc = getattr(flowable, "_wb_toc", None)
         if toc is None:
@@ -246,7 +253,7 @@ def _col_widths(cells: list[list[str]], fonts: list[list[str]], size: float,
             lines = text.split("\n") or [""]
             wid = max(pdfmetrics.stringWidth(ln, font, size) for ln in lines)
             natural[j] = max(natural[j], wid)
-            words = text.split() or [""]
+            words = text.split(" ")  # not at no-break spaces (formulas, 10 ms)
             soft[j] = max(soft[j], max(pdfmetrics.stringWidth(w, font, size) for w in words))
             if i >= n_head and kinds[j] in ("num", "nowrap"):
                 hard[j] = max(hard[j], wid)
@@ -304,18 +311,17 @@ def _base_table_style(n_head: int, n_rows: int) -> list:
 
 
 def _table(it: Item, st: _Styles) -> list:
-    b: Table = it.block
-    kinds = b.column_kinds()
-    texts = b.formatted_rows()
-    has_units = b.units is not None and any(b.units)
-    units = [f"[{u}]" if u else "" for u in b.units] if has_units else []
-    head_txt = [list(b.columns)] + ([units] if has_units else [])
+    v = it.block.view()
+    kinds = v.kinds
+    has_units = v.units is not None and any(v.units)
+    units = [f"[{u}]" if u else "" for u in v.units] if has_units else []
+    head_txt = [list(v.columns)] + ([units] if has_units else [])
     head_fonts = [[st.bold] * len(kinds)] + ([[st.sans] * len(kinds)] if has_units else [])
-    body_fonts = [[st.bold if _is_bool(v) else st.sans for v in row] for row in b.rows]
+    body_fonts = [[st.bold if _is_bool(x) else st.sans for x in row] for row in v.values]
     # Wide tables: a smaller font before splitting words, and before splitting numbers.
     best = None
     for size in TABLE_FONT_SIZES:
-        widths, fit = _col_widths(head_txt + [list(r) for r in texts], head_fonts + body_fonts,
+        widths, fit = _col_widths(head_txt + [list(r) for r in v.texts], head_fonts + body_fonts,
                                   size, kinds, FRAME_W, fill=1.0, n_head=len(head_txt))
         if best is None or fit > best[2]:
             best = (size, widths, fit)
@@ -323,18 +329,19 @@ def _table(it: Item, st: _Styles) -> list:
             break
     size, widths, _ = best
     cell, hd, un = st.sized(size)
-    head = [[RLParagraph(_esc(c), hd[k]) for c, k in zip(b.columns, kinds)]]
+    head = [[RLParagraph(_esc(c), hd[k]) for c, k in zip(v.columns, kinds)]]
     if has_units:
         head.append([RLParagraph(_esc(u), un[k]) for u, k in zip(units, kinds)])
-    body = [[RLParagraph(_cell_markup(t, v), cell[k]) for t, v, k in zip(row_t, row_v, kinds)]
-            for row_t, row_v in zip(texts, b.rows)]
+    body = [[RLParagraph(_cell_markup(t, x), cell[k]) for t, x, k in zip(row_t, row_v, kinds)]
+            for row_t, row_v in zip(v.texts, v.values)]
     style = _base_table_style(len(head), len(body))
     for j in range(1, len(kinds)):  # air between a number and the text to its right
         if kinds[j - 1] == "num" and kinds[j] != "num":
             style.append(("LEFTPADDING", (j, 0), (j, -1), 3 * CELL_PAD))
     table = RLTable(head + body, colWidths=widths, repeatRows=len(head), hAlign="LEFT",
                     style=TableStyle(style))
-    return [RLParagraph(_caption_markup(it), st.caption), table, Spacer(1, 8)]
+    return [KeepGroup([RLParagraph(_caption_markup(it), st.caption)], table, [Spacer(1, 8)],
+                      FRAME_H)]
 
 
 def _caption_markup(it: Item) -> str:
@@ -356,8 +363,8 @@ def _key_values(b: KeyValues, st: _Styles) -> list:
     widths, _ = _col_widths(txt, fonts, st.cell["text"].fontSize, ("nowrap", "text"),
                             FRAME_W, fill=0.55)
     style = _base_table_style(0, len(rows)) + [("LINEABOVE", (0, 0), (-1, 0), 1.0, INK)]
-    return [RLTable(rows, colWidths=widths, hAlign="LEFT", style=TableStyle(style)),
-            Spacer(1, 8)]
+    return [KeepGroup([], RLTable(rows, colWidths=widths, hAlign="LEFT", style=TableStyle(style)),
+                      [Spacer(1, 8)], FRAME_H)]
 
 
 def _figure(it: Item, st: _Styles) -> list:
@@ -371,7 +378,7 @@ def _figure(it: Item, st: _Styles) -> list:
     img = Image(io.BytesIO(b.image), width=w, height=h)
     img.hAlign = "CENTER"
     cap = RLParagraph(_caption_markup(it), st.fig_caption)
-    return [KeepTogether([Spacer(1, 4), img, cap])]
+    return [KeepGroup([Spacer(1, 4)], img, [cap], FRAME_H, png=b.image)]
 
 
 def _banner(b: Status, st: _Styles) -> list:
@@ -419,19 +426,20 @@ def _item(it: Item, st: _Styles) -> list:
 
 
 def _glue(story: list) -> list:
-    """Put headings and captions (keepWithNext) into a following KeepTogether.
+    """Put headings and captions (keepWithNext) into the lead of a following group.
 
     reportlab keeps a keepWithNext flowable with the next one only if that is
     not itself a container, so a heading before a figure could be left alone at
-    the foot of a page; merging them into the figure's KeepTogether fixes that.
+    the foot of a page; the group (:class:`.pdf_flow.KeepGroup`) keeps them with
+    the figure, or with the first rows of a table.
     """
     out: list = []
     pending: list = []
     for f in story:
-        if isinstance(f, KeepTogether) and pending:
-            out.append(KeepTogether(pending + list(f._content)))
+        if isinstance(f, KeepGroup) and pending:
+            out.append(f.with_lead(pending))
             pending = []
-        elif getattr(f, "getKeepWithNext", lambda: False)() and not isinstance(f, KeepTogether):
+        elif getattr(f, "getKeepWithNext", lambda: False)() and not isinstance(f, KeepGroup):
             pending.append(f)
         else:
             out += pending

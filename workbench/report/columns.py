@@ -1,0 +1,333 @@
+"""Table columns: one number format per column, one status vocabulary, unbroken formulas.
+
+Rules the renderers share (both :mod:`.html` and :mod:`.pdf` use them, through
+:meth:`~.document.Table.view`):
+
+* **One number format per column.** :func:`column_format` chooses the format from
+  all the numbers of a column at once: fixed decimals, as many as the smallest
+  magnitude needs for ``digits`` significant digits, when the column spans at
+  most :data:`FIXED_SPAN` decades inside ``1e-3 <= |x| < 1e6``; scientific
+  notation with a shared mantissa length otherwise (the dynamic range demands
+  it). Trailing zeros shared by every number of the column are dropped, so a
+  column of whole numbers stays ``100, 30, 5``. A column of integers is shown
+  in full.
+* **Numbers given as text are numbers.** A text cell that is just a number
+  (``"0.00084788"``, ``"<= 16.75"``, ``"inf"``, ``"8.6447 FAIL"``) is formatted
+  with its column, so a design that formatted values itself still gets one
+  format per column.
+* **One status vocabulary.** ``PASS``/``FAIL`` (and ``NOTE``/``ERROR`` in
+  banners); ``"passed"``, ``"PASSED"``, ``"fail"``, ``"FAILED"`` ... are accepted and
+  shown as ``PASS``/``FAIL``.
+* **Empty cells.** ``None``, ``""``, ``"-"``, ``"n/a"`` count as empty; a column
+  whose cells are all empty is dropped from the rendered table.
+* **Headers break between words, never inside a formula or between a number and
+  its unit** (:func:`keep_formulas`): those spaces become no-break spaces.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import re
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+__all__ = ["TableView", "table_view", "STATUS_WORDS", "FIXED_SPAN", "NBSP", "status_word", "is_empty", "number_text",
+           "column_format", "keep_formulas"]
+
+#: Accepted spellings of a verdict (lower case) and the word shown for each.
+STATUS_WORDS = {"pass": "PASS", "passed": "PASS", "fail": "FAIL", "failed": "FAIL"}
+
+#: Widest span of a column shown in fixed decimals, decades between the largest
+#: and the smallest nonzero magnitude (beyond it: scientific notation).
+FIXED_SPAN = 3
+
+#: No-break space (U+00A0): a header never wraps there.
+NBSP = "\u00a0"
+
+_PLACEHOLDERS = {"", "-", "\u2013", "\u2014", "n/a", "na", "nan"}
+_NUMBER = re.compile(r"^(?P<pre>(?:<=|>=|<|>|\u2264|\u2265|~|\u2248|=)\s*)?"
+                     r"(?P<num>[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?inf)"
+                     r"(?P<post>\s+(?:pass|passed|fail|failed))?$", re.IGNORECASE)
+
+
+def _is_bool(value: Any) -> bool:
+    return isinstance(value, (bool, np.bool_))
+
+
+def status_word(value: Any) -> str | None:
+    """``"PASS"``/``"FAIL"`` for a bool or an accepted verdict word, else None."""
+    if _is_bool(value):
+        return "PASS" if value else "FAIL"
+    if isinstance(value, str):
+        return STATUS_WORDS.get(value.strip().lower())
+    return None
+
+
+def is_empty(value: Any) -> bool:
+    """True for None, NaN and the text placeholders of a missing value."""
+    if value is None:
+        return True
+    if isinstance(value, str):
+        return value.strip().lower() in _PLACEHOLDERS
+    if isinstance(value, numbers.Real) and not _is_bool(value):
+        return math.isnan(float(value))
+    return False
+
+
+def number_text(value: Any) -> tuple[str, float | int, str] | None:
+    """``(prefix, number, suffix)`` when ``value`` is a number or a text that is one.
+
+    The prefix is a relation written before the number (``"<= "``), kept as
+    typed; the suffix a verdict after it (``"8.64 failed"``), shown as
+    ``" FAIL"``. Integers (not bool) stay ``int``; numeric text with a decimal
+    point or an exponent becomes ``float``, plain digits ``int``.
+    """
+    if isinstance(value, numbers.Real) and not _is_bool(value):
+        return "", value if isinstance(value, numbers.Integral) else float(value), ""
+    if not isinstance(value, str):
+        return None
+    m = _NUMBER.match(value.strip())
+    if m is None:
+        return None
+    num = m.group("num")
+    number = int(num) if re.fullmatch(r"[+-]?\d+", num) else float(num)
+    post = m.group("post")
+    return m.group("pre") or "", number, " " + status_word(post) if post else ""
+
+
+def _decade(x: float, digits: int) -> int:
+    """Decade of ``x`` after rounding to ``digits`` significant digits."""
+    return math.floor(math.log10(abs(float(f"{x:.{digits - 1}e}"))))
+
+
+def _shared_decimals(decimals: int, render: Callable[[int], list[str]]) -> int:
+    """Fewest decimals, down from ``decimals``, dropping only zeros shared by every text."""
+    while decimals > 0 and all(_mantissa(t).endswith("0") for t in render(decimals)):
+        decimals -= 1
+    return decimals
+
+
+def _mantissa(text: str) -> str:
+    return text.split("e")[0]
+
+
+def column_format(values: Sequence[float | int], digits: int = 4) -> Callable[[Any], str]:
+    """The one format of a column of numbers, as a function number -> text.
+
+    Parameters
+    ----------
+    values : sequence of float or int
+        All numbers of the column (None and NaN may be included; they are shown
+        as ``n/a``, ``inf`` as ``inf``).
+    digits : int
+        Significant digits of the smallest nonzero magnitude (fixed notation) or
+        of every mantissa (scientific notation), >= 1.
+
+    Returns
+    -------
+    callable
+        ``f(x) -> str`` for any value of the column.
+
+    Examples
+    --------
+    >>> f = column_format([16.75, 0.18313, 12.006]); [f(v) for v in (16.75, 0.18313, 0)]
+    ['16.7500', '0.1831', '0.0000']
+    >>> f = column_format([0.00038778, 2.3634e-08]); f(0.00038778), f(2.3634e-08)
+    ('3.878e-4', '2.363e-8')
+    """
+    finite = [v for v in values if v is not None and not _is_bool(v)
+              and math.isfinite(float(v))]
+    if finite and all(isinstance(v, numbers.Integral) for v in finite):
+        return _special(lambda x: str(int(x)))
+    nonzero = [float(v) for v in finite if float(v) != 0.0]
+    if not nonzero:
+        return _special(lambda x: "0" if float(x) == 0.0 else str(x))
+    lo = min(_decade(v, digits) for v in nonzero)
+    hi = max(_decade(v, digits) for v in nonzero)
+    if hi - lo <= FIXED_SPAN and lo >= -3 and hi <= 5:
+        decimals = _shared_decimals(max(digits - 1 - lo, 0),
+                                    lambda d: [f"{v:.{d}f}" for v in finite])
+        return _special(lambda x: _no_negative_zero(f"{float(x):.{decimals}f}"))
+    mant = _shared_decimals(max(digits - 1, 0), lambda d: [_sci(v, d) for v in nonzero])
+    return _special(lambda x: "0" if float(x) == 0.0 else _sci(float(x), mant))
+
+
+def _sci(x: float, mant: int) -> str:
+    m, e = f"{x:.{mant}e}".split("e")
+    return f"{m}e{int(e)}"
+
+
+def _no_negative_zero(text: str) -> str:
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
+
+
+def _special(body: Callable[[Any], str]) -> Callable[[Any], str]:
+    def fmt(x: Any) -> str:
+        if x is None or (not _is_bool(x) and isinstance(x, numbers.Real)
+                         and math.isnan(float(x))):
+            return "n/a"
+        if math.isinf(float(x)):
+            return "inf" if float(x) > 0 else "-inf"
+        return body(x)
+    return fmt
+
+
+# --------------------------------------------------------------------------- tables
+
+@dataclass(frozen=True)
+class TableView:
+    """A table as shown: the kept columns, their kinds and the text of every cell.
+
+    ``values`` holds, per cell, what decides its colour: True/False for a verdict
+    (bool or verdict word), None for an empty cell, else the cell as given.
+    """
+
+    columns: tuple[str, ...]
+    units: tuple[str, ...] | None
+    kinds: tuple[str, ...]
+    texts: tuple[tuple[str, ...], ...]
+    values: tuple[tuple[Any, ...], ...]
+    dropped: tuple[str, ...] = ()
+
+
+def _column_kind(cells: list) -> str:
+    full = [c for c in cells if not is_empty(c)]
+    if full and all(number_text(c) is not None for c in full):
+        return "num"
+    if full and all(status_word(c) is not None for c in full):
+        return "status"
+    return "text"
+
+
+def _column_texts(cells: list, digits: int) -> tuple[list[str], list[Any]]:
+    numbers_ = [number_text(c) for c in cells]
+    fmt = column_format([n[1] for n in numbers_ if n is not None], digits)
+    texts, values = [], []
+    for c, n in zip(cells, numbers_):
+        word = status_word(c)
+        if word is not None:
+            texts.append(word)
+            values.append(word == "PASS")
+        elif n is not None:
+            texts.append(n[0] + fmt(n[1]) + n[2])
+            values.append(None if texts[-1] == "n/a" else c)
+        elif is_empty(c):
+            shown = "" if c is None else str(c).strip()
+            texts.append("n/a" if shown.lower() in ("", "n/a", "na", "nan") else shown)
+            values.append(None)
+        else:
+            texts.append(str(c))
+            values.append(c)
+    return texts, values
+
+
+def table_view(columns: Sequence[str], units: Sequence[str] | None, rows: Sequence[Sequence],
+               digits: int = 4, drop_empty: bool = True) -> TableView:
+    """Kinds, one format per column and the dropped empty columns of a table.
+
+    Parameters
+    ----------
+    columns, units, rows
+        As in :class:`~.document.Table` (already checked).
+    digits : int
+        Significant digits (see :func:`column_format`).
+    drop_empty : bool
+        Drop the columns with no value in any row (all are kept when every
+        column is empty, so a table with no rows still shows its header).
+    """
+    ncol = len(columns)
+    cols = [[r[j] for r in rows] for j in range(ncol)]
+    keep = [j for j in range(ncol) if not (drop_empty and rows
+                                           and all(is_empty(c) for c in cols[j]))]
+    keep = keep or list(range(ncol))
+    kinds, texts, values = [], [], []
+    for j in keep:
+        kinds.append(_column_kind(cols[j]))
+        t, v = _column_texts(cols[j], digits)
+        texts.append(t)
+        values.append(v)
+    unit_row = None if units is None else tuple(keep_formulas(units[j]) for j in keep)
+    return TableView(columns=tuple(keep_formulas(columns[j]) for j in keep), units=unit_row,
+                     kinds=tuple(kinds), texts=tuple(zip(*texts)) if rows else (),
+                     values=tuple(zip(*values)) if rows else (),
+                     dropped=tuple(columns[j] for j in range(ncol) if j not in keep))
+
+
+# --------------------------------------------------------------------------- headers
+
+_OPERATORS = set("=<>+-*/^|~\u00b7\u00d7\u2264\u2265\u2248\u00b1\u2212")
+_STOPWORDS = {"of", "at", "to", "in", "on", "and", "or", "the", "per", "for", "vs", "a",
+              "an", "is", "by", "as", "if", "no", "not", "with"}
+_NUM = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?%?$")
+_MAX_CHUNK = 28  # characters: a longer "formula" is prose, left breakable
+
+
+def _is_operator(token: str) -> bool:
+    """``=``, ``<=``, ``-``, ``/`` ... or a lone ``x`` (a product: ``bandwidth x T``)."""
+    return token == "x" or (bool(token) and all(c in _OPERATORS for c in token))
+
+
+def _depths(tokens: list[str]) -> list[bool]:
+    """For each space between tokens: is it inside (), [], {} or |...|?"""
+    inside, depth, bars = [], 0, 0
+    for tok in tokens[:-1]:
+        for c in tok:
+            if c in "([{":
+                depth += 1
+            elif c in ")]}":
+                depth = max(depth - 1, 0)
+            elif c == "|":
+                bars ^= 1
+        inside.append(depth > 0 or bars == 1)
+    return inside
+
+
+def keep_formulas(text: str) -> str:
+    """``text`` with the spaces inside formulas and number-unit pairs made no-break.
+
+    A space is kept from breaking when a token next to it is an operator
+    (``=``, ``-``, ``<=``, ``/`` ...), when it is inside brackets or ``|...|``
+    (unless the text reads as prose: it holds a comma), or when it follows a
+    number (``10 ms``). A formula found this way also takes in the short symbol
+    tokens around it (``K0 = kp Kv``, ``max |x - x_r|``). Chunks longer than 28
+    characters are left breakable. Line breaks in ``text`` are kept.
+
+    Examples
+    --------
+    >>> keep_formulas("max |x - x_r| fraction of step").replace(NBSP, "~")
+    'max~|x~-~x_r| fraction of step'
+    """
+    if "\n" in text:
+        return "\n".join(keep_formulas(line) for line in text.split("\n"))
+    tokens = text.split(" ")
+    if len(tokens) < 2:
+        return text
+    inside = _depths(tokens)
+    bond = [False] * (len(tokens) - 1)
+    for i in range(len(bond)):
+        a, b = tokens[i], tokens[i + 1]
+        prose_group = inside[i] and "," in text  # brackets holding a list: prose
+        bond[i] = (_is_operator(a) or _is_operator(b) or (inside[i] and not prose_group)
+                   or bool(_NUM.match(a)) and bool(b))
+    formula = any(_is_operator(t) for t in tokens) or any(bond)
+    if formula:  # short symbols next to a formula belong to it: "K0 = kp Kv"
+        short = [0 < len(t) <= 3 and t.lower() not in _STOPWORDS and not _NUM.match(t)
+                 for t in tokens]
+        for _ in range(2):
+            for i in range(len(bond)):
+                left = bond[i - 1] if i > 0 else False
+                right = bond[i + 1] if i + 1 < len(bond) else False
+                if not bond[i] and ((short[i] and right) or (short[i + 1] and left)
+                                    or (short[i] and short[i + 1] and (left or right))):
+                    bond[i] = True
+    out = [tokens[0]]
+    for i, b in enumerate(bond):
+        out.append(NBSP if b else " ")
+        out.append(tokens[i + 1])
+    joined = "".join(out)
+    # leave over-long chunks breakable (prose in brackets, long formulas)
+    pieces = joined.split(" ")
+    return " ".join(p if len(p) <= _MAX_CHUNK else p.replace(NBSP, " ") for p in pieces)

@@ -1,0 +1,178 @@
+"""Page flow of the PDF: figures and tables never leave a page half empty.
+
+reportlab keeps a heading or caption with the next flowable by moving the whole
+group to the next page when it does not fit; for a tall figure or a long table
+that leaves most of a page blank. :class:`KeepGroup` replaces that rule:
+
+* a **table** that does not fit is split by rows where the page ends (its
+  heading, caption and header rows stay with the first rows; the header rows are
+  repeated on the next page);
+* a **figure** that does not fit is scaled down to the space left when moving it
+  would leave more than :data:`MAX_EMPTY` of the page empty (not below
+  :data:`MIN_SCALE` of its size), and always when it needs to lose at most
+  ``1 - EASY_SCALE`` of its size;
+* a figure that still does not fit lets the text blocks that follow it (up to the
+  next heading or figure) go first when they fit in the space left, and takes the
+  top of the next page (:func:`float_figures`, called from the doc template).
+
+The group always asks to be split (as reportlab's ``KeepTogether``), so every
+heading inside it is handed to the doc template on its own and still reaches
+the table of contents and the PDF outline.
+"""
+
+from __future__ import annotations
+
+import io
+
+from reportlab.platypus import Image
+from reportlab.platypus.doctemplate import FrameBreak
+from reportlab.platypus.flowables import Flowable, _listWrapOn
+
+__all__ = ["KeepGroup", "float_figures", "MAX_EMPTY", "MIN_SCALE", "EASY_SCALE"]
+
+#: Largest fraction of a page's text frame left empty before a figure or table
+#: that moves to the next page.
+MAX_EMPTY = 0.4
+
+#: Smallest scale a figure is shrunk to so that it fits the rest of a page.
+MIN_SCALE = 0.5
+
+#: A figure that fits at this scale or more is always shrunk rather than moved.
+EASY_SCALE = 0.85
+
+_FUZZ = 1.0  # pt of slack when fitting scaled figures (rounding in reportlab's frame)
+
+
+class KeepGroup(Flowable):
+    """Lead flowables (headings, caption), a body (table or image), tail flowables.
+
+    Parameters
+    ----------
+    lead : list of Flowable
+        Kept on the same page as the start of the body (headings, a table caption).
+    body : Flowable
+        An ``Image`` (a figure: may be scaled) or a ``Table`` (may be split by rows).
+    tail : list of Flowable
+        After the body (a figure caption, a spacer).
+    frame_height : float
+        Height of a page's text frame, pt (what :data:`MAX_EMPTY` is a fraction of).
+    png : bytes, optional
+        The figure's PNG, to draw it again at a smaller size.
+    """
+
+    def __init__(self, lead, body, tail, frame_height, png=None):
+        super().__init__()
+        self.lead, self.body, self.tail = list(lead), body, list(tail)
+        self.frame_height = float(frame_height)
+        self.png = png
+
+    @property
+    def is_figure(self) -> bool:
+        return self.png is not None
+
+    def with_lead(self, more: list) -> "KeepGroup":
+        """The same group with ``more`` flowables put in front of its lead."""
+        return KeepGroup(list(more) + self.lead, self.body, self.tail, self.frame_height,
+                         self.png)
+
+    def content(self) -> list:
+        return self.lead + [self.body] + self.tail
+
+    def _height(self, flowables, aw) -> float:
+        """Height of ``flowables`` stacked in a frame (not at its top), pt."""
+        if not flowables:
+            return 0.0
+        return _listWrapOn(flowables, aw, self.canv)[1] + flowables[0].getSpaceBefore()
+
+    def natural_height(self, aw: float) -> float:
+        return self._height(self.content(), aw)
+
+    def wrap(self, aw, ah):
+        self._natural = self.natural_height(aw)
+        return aw, 0xFFFFFF  # always split: the parts reach the doc template one by one
+
+    def figure_scale(self, aw: float, ah: float) -> float:
+        """Scale at which the figure (with lead and tail) fits ``ah``, <= 1."""
+        img_h = self.body.drawHeight
+        rest = self.natural_height(aw) - img_h
+        return min(max((ah - rest - _FUZZ) / img_h, 0.0), 1.0)
+
+    def fits_somehow(self, aw: float, ah: float) -> bool:
+        """Fits as is, or scaled down within the rules of this module."""
+        if self.natural_height(aw) <= ah:
+            return True
+        if not self.is_figure:
+            return False
+        s = self.figure_scale(aw, ah)
+        return s >= EASY_SCALE or (s >= MIN_SCALE and ah > MAX_EMPTY * self.frame_height)
+
+    def split(self, aw, ah):
+        at_top = bool(getattr(getattr(self, "_frame", None), "_atTop", False))
+        if self.natural_height(aw) <= ah or (at_top and self.is_figure):
+            return self.content()
+        if self.is_figure:
+            if self.fits_somehow(aw, ah):
+                s = self.figure_scale(aw, ah)
+                img = Image(io.BytesIO(self.png), width=self.body.drawWidth * s,
+                            height=self.body.drawHeight * s)
+                img.hAlign = self.body.hAlign
+                return self.lead + [img] + self.tail
+            return [FrameBreak()] + self.content()
+        room = ah - self._height(self.lead, aw) - self.body.getSpaceBefore()
+        for _ in range(4):  # spacing between lead and rows: shrink the room until it fits
+            parts = self.body.split(aw, room) if room > 0 else []
+            if len(parts) < 2:
+                break
+            excess = self._height(self.lead + [parts[0]], aw) - ah
+            if excess <= 0:
+                return self.lead + list(parts) + self.tail
+            room -= excess + _FUZZ
+        return ([] if at_top else [FrameBreak()]) + self.content()
+
+
+def _movable(f) -> bool:
+    """A block that may go before a figure that waits for the next page."""
+    if isinstance(f, KeepGroup):
+        return not f.is_figure and not any(getattr(x, "_wb_toc", None) for x in f.lead)
+    if getattr(f, "_wb_toc", None) is not None:        # a heading
+        return False
+    return not getattr(f, "getKeepWithNext", lambda: False)()
+
+
+def float_figures(flowables: list, frame, canv, frame_height: float) -> None:
+    """Let text go before a figure that fits nowhere on this page (in place).
+
+    Called by the doc template before it handles ``flowables[0]``. When that is a
+    figure group that neither fits nor may be shrunk into the rest of the page,
+    and the page would otherwise be left more than :data:`MAX_EMPTY` empty, the
+    next block is moved before the figure if it fits entirely into the space
+    left (its headings first, when the figure's group holds them); repeated for
+    each following block up to the next heading or figure.
+    """
+    if not flowables or not isinstance(flowables[0], KeepGroup):
+        return
+    group = flowables[0]
+    if not group.is_figure or getattr(frame, "_atTop", False):
+        return
+    aw = frame._getAvailableWidth()
+    ah = frame._y - frame._y1p
+    if ah <= MAX_EMPTY * frame_height:
+        return
+    group.canv = canv
+    if group.fits_somehow(aw, ah):
+        return
+    if len(flowables) < 2 or not _movable(flowables[1]):
+        return
+    nxt = flowables[1]
+    nxt.canv = canv
+    heads = [f for f in group.lead if getattr(f, "_wb_toc", None) is not None
+             or getattr(f, "getKeepWithNext", lambda: False)()]
+    try:
+        need = _listWrapOn(heads + [nxt], aw, canv)[1]
+    except Exception:  # noqa: BLE001 - a block that cannot be measured stays where it is
+        return
+    if need > ah:
+        return
+    rest = KeepGroup([f for f in group.lead if f not in heads], group.body, group.tail,
+                     group.frame_height, group.png)
+    flowables[0:2] = heads + [nxt, rest]
