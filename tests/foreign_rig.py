@@ -22,7 +22,10 @@ on sharing its simulator's discretisation):
 - supply droop: reservoir of volume V_r fed through an ISO 6358 regulator
   restriction (b = 0.528) from the set pressure, dp_s/dt = k r T/V_r (q_reg - q_valve);
 - dry friction: a smooth Stribeck curve times tanh(v / v_eps) plus viscous friction
-  (the workbench uses Karnopp stick-slip);
+  (the workbench uses Karnopp stick-slip), or (``law="lugre"``) the LuGre bristle model
+  (Canudas de Wit et al. 1995): dz/dt = v - sigma0 |v| z / g(v), g(v) = Fc + (Fs - Fc)
+  exp(-(v/vs)^2), F = sigma0 z + sigma1 dz/dt, with pre-sliding displacement and
+  frictional lag that neither the Karnopp nor the smooth law has;
 - end stops: stiff spring-damper at 0 and L.
 
 The PD loop of the plant's [controller] runs every sample_time on the noisy,
@@ -78,7 +81,8 @@ def load_plant(plant_file, overrides=None) -> dict:
 class ForeignRig:
     """The rig's state equations; ``P`` is the flat dict of :func:`load_plant`."""
 
-    def __init__(self, P: dict, coulomb=0.0, static=0.0, stribeck=0.01, v_eps=2e-3):
+    def __init__(self, P: dict, coulomb=0.0, static=0.0, stribeck=0.01, v_eps=2e-3,
+                 law="smooth", sigma0=None, sigma1=None):
         self.P = P
         self.k, self.patm, self.T = (P["gas.polytropic_index"], P["gas.atmospheric_pressure"],
                                      P["gas.temperature"])
@@ -98,7 +102,13 @@ class ForeignRig:
         idx += 4 * LINE_NODES if self.lines else 0
         self.i_ps = idx
         idx += 1 if self.droop else 0
+        self.lugre = law == "lugre" and bool(coulomb)
+        self.i_z = idx
+        idx += 1 if self.lugre else 0
         self.n = idx
+        # bristles: break-away within 0.1 mm of pre-sliding, critically damped on the mass
+        self.sigma0 = sigma0 if sigma0 is not None else max(static, coulomb) / 1e-4
+        self.sigma1 = sigma1 if sigma1 is not None else 2.0 * math.sqrt(self.sigma0 * self.m)
         if self.lines:
             d = P["lines.diameter"]
             self.a_line = math.pi / 4 * d * d
@@ -138,8 +148,13 @@ class ForeignRig:
         v = self.P["cylinder.dead_volume_b"] + self.A * (self.L - x)
         return v + (0.5 * self.v_node if self.lines else 0.0)
 
-    def friction(self, v):
+    def friction(self, v, z=None, dz=None):
         f = self.P["load.viscous_friction"] * v
+        if self.lugre:
+            g = self.fc + (self.fs - self.fc) * math.exp(-(v / self.vs) ** 2)
+            zd = v - self.sigma0 * abs(v) * z[self.i_z] / g
+            dz[self.i_z] = zd
+            return f + self.sigma0 * z[self.i_z] + self.sigma1 * zd
         if self.fc:
             f += (self.fc + (self.fs - self.fc) * math.exp(-(v / self.vs) ** 2)) \
                 * math.tanh(v / self.v_eps)
@@ -211,7 +226,7 @@ class ForeignRig:
         else:
             dz[2], dz[self.i_mass] = self._energy(pa, ta, va, A * v, qa, -la - cross, tb)
             dz[3], dz[self.i_mass + 1] = self._energy(pb, tb, vb, -A * v, qb, -lb + cross, ta)
-        force = (pa - pb) * A - self.friction(v)
+        force = (pa - pb) * A - self.friction(v, z, dz)
         kwall, m = self.m * (2 * math.pi * 200.0) ** 2, self.m
         if x < 0:
             force -= kwall * x + 1.4 * m * 2 * math.pi * 200.0 * v
@@ -246,7 +261,8 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
     plant_file : the nominal plant TOML (its [controller] is the loop).
     reference : r(t), m. duration : s. seed : seed of the position sensor noise.
     overrides : concealed dotted keys (formats.md section 2) -> values, SI.
-    friction : dict(coulomb, static, stribeck[, v_eps]) of the smooth dry-friction law.
+    friction : dict(coulomb, static, stribeck[, v_eps]) of the smooth dry-friction law, or
+        with ``law="lugre"`` (and optionally sigma0 N/m, sigma1 N s/m) the LuGre model.
     p0 : chamber pressures at rest at the start, Pa. rtol : LSODA's relative tolerance.
 
     Returns
@@ -269,6 +285,8 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
     U = np.empty(n)
     atol = np.full(rig.n, 1e-2)
     atol[:2] = 1e-9, 1e-7
+    if rig.lugre:
+        atol[rig.i_z] = 1e-10            # bristle deflection, m (pre-sliding ~0.1 mm)
     if rig.heat is not None:
         atol[rig.i_mass:rig.i_mass + 2] = 1e-12
     if rig.lines:
@@ -295,8 +313,10 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
     return t, Z, U, (rng, nx)
 
 
-def record(plant_file, reference, duration, seed, **kw):
-    """:func:`simulate` logged as a Recording: noise (20 um, 500 Pa) and 12-bit quantisation."""
+def record(plant_file, reference, duration, seed, pressures=True, **kw):
+    """:func:`simulate` logged as a Recording: noise (20 um, 500 Pa) and 12-bit quantisation;
+    ``pressures=False``: position only (the pressure noise is drawn all the same, so the
+    position is the same as with pressures)."""
     from workbench.recording import Recording
     t, Z, U, (rng, nx) = simulate(plant_file, reference, duration, seed, **kw)
     n = len(t)
@@ -305,5 +325,6 @@ def record(plant_file, reference, duration, seed, **kw):
     PA = np.round((Z[:, 2] + rng.normal(0, 500.0, n)) / lsb_p) * lsb_p
     PB = np.round((Z[:, 3] + rng.normal(0, 500.0, n)) / lsb_p) * lsb_p
     meta = {"sample_time": t[1] - t[0], "source": "tests/foreign_rig.py"}
-    return Recording.from_arrays(t, u=U, x=X, p_a=PA, p_b=PB,
-                                 r=np.asarray(reference(t), float), metadata=meta)
+    cols = {"p_a": PA, "p_b": PB} if pressures else {}
+    return Recording.from_arrays(t, u=U, x=X, r=np.asarray(reference(t), float),
+                                 metadata=meta, **cols)

@@ -527,7 +527,7 @@ def test_uncertainty_is_the_gauss_newton_covariance_written_out():
     vals = {"leakage.k": 3e-9, "load.mass": 1.7}
     cov_z = np.linalg.inv(J.T @ J) * (r @ r) / (m - 2)
     for n_eff, infl in ((10.0, 4.0), (400.0, 1.0)):
-        std, ci = _uncertainty(free, vals, J, r, n_eff)
+        std, ci, _ = _uncertainty(free, vals, J, r, n_eff)
         sz = np.sqrt(np.diag(cov_z) * infl)
         assert std["leakage.k"] == pytest.approx(3e-9 * sz[0], rel=1e-10)
         assert ci["leakage.k"] == pytest.approx(

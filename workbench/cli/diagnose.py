@@ -17,10 +17,13 @@ DESCRIPTION = (
     "time and operating regime, refits every candidate effect of formats.md section 2 "
     "(dry_friction, valve_deadband, valve_offset, valve_dynamics, line_dynamics, leakage, "
     "supply_droop, heat_transfer) and wrong nominal values (parameter_error: load.mass, "
-    "load.viscous_friction, valve.sonic_conductance, supply.pressure), ranks them by evidence "
-    "and adds what is significant. Writes DIR/diagnosis.json (formats.md section 4), "
+    "load.viscous_friction, valve.sonic_conductance, supply.pressure), ranks them by evidence, "
+    "refits pairs and triples of the best jointly and keeps the set with the lowest BIC in "
+    "which every member earns its place. Writes DIR/diagnosis.json (formats.md section 4), "
     "DIR/plant.augmented.toml, DIR/report.html (+ report.pdf) and DIR/details.json "
-    "(every candidate's evidence).")
+    "(every candidate's evidence), all or nothing. A replay that fails (non-finite, "
+    "piston beyond the stroke) or fits worse than a constant, with no candidate to "
+    "explain it, is an error with its cause (exit 2), never 'no finding'.")
 
 
 def register(subparsers) -> None:
@@ -51,6 +54,8 @@ def register(subparsers) -> None:
 def _diagnose(args: argparse.Namespace) -> int:
     """Run the sub-command (errors a user can cause are WorkbenchError: exit 2 in main)."""
     from ..diagnose import diagnose
+    from ..output import check_output_dir
+    check_output_dir(args.out)            # refused before minutes of work, not after
     verbose = not args.quiet and not args.json
     if verbose:
         print(f"diagnosing {args.recording} on {args.plant} ...", file=sys.stderr, flush=True)
@@ -59,7 +64,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     rec = load_from_args(args, args.recording, plant=PlantParams.from_toml(args.plant))
     d = diagnose(args.plant, rec, effects=args.effects, workers=args.workers,
                  mode=args.mode, verbose=verbose)
-    paths = d.write(args.out, report=not args.no_report)
+    paths = d.write(args.out, report=not args.no_report, inputs=[args.plant, args.recording])
     if args.json:
         print(json.dumps(d.to_dict(), indent=2))
     else:

@@ -13,6 +13,7 @@ The method is split into parts (one concept per module):
 * :mod:`.explain` -- all candidates in parallel, ranked by evidence; the findings chosen;
 * :mod:`.evidence` -- a finding's evidence sentence and confidence;
 * :mod:`.polish` -- a finding's values refined by the grey-box estimator;
+* :mod:`.health` -- failed replays (never a silent all-clear) and the noise floor;
 * :mod:`.core` -- :func:`diagnose`: replay, locate, explain, augment, refit;
 * :mod:`.report`, :mod:`.figures` -- the HTML/PDF report (``workbench diagnose`` is
   :mod:`workbench.cli.diagnose`, ``workbench bench diagnose`` :mod:`workbench.bench.diagnose`);
@@ -33,7 +34,8 @@ recordings, e.g. from :func:`.synth.record` written with ``case.write_nominal`` 
 
 from .candidates import Candidate, Free, candidates
 from .core import Diagnosis, Finding, diagnose, replay
+from .health import DiagnosisError
 from .explain import Ranked
 
 __all__ = ["diagnose", "Diagnosis", "Finding", "Ranked", "Candidate", "Free", "candidates",
-           "replay"]
+           "replay", "DiagnosisError"]

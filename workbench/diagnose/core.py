@@ -15,15 +15,18 @@ Method
    flow witnesses (mass flow each chamber received by the chamber equation, minus the
    valve law at the recorded command and pressures) and the force witness are shown
    in the report.
-3. **Explain** (:mod:`.candidates`, :mod:`.refit`, :mod:`.explain`): every effect of
-   formats.md section 2 and every nominal value that may be wrong is added to the
-   plant and refitted on the short-horizon predictions (signature scan on a grid,
-   then bounded least squares; all candidates in parallel processes; the four most
-   promising refitted fully). Evidence: share of the mismatch removed, information
-   criterion (dBIC with an effective number of observations), no loss on the
-   re-anchored closed-loop replay, consistency with the regimes where the effect acts.
-   The best significant candidate is the first finding; further ones are added
-   greedily while they stay significant on top; nothing significant: no finding.
+3. **Explain** (:mod:`.candidates`, :mod:`.refit`, :mod:`.explain`, :mod:`.sets`):
+   every effect of formats.md section 2 and every nominal value that may be wrong is
+   added to the plant and refitted on the short-horizon predictions (signature scan
+   on a grid, then bounded least squares; all candidates in parallel processes; the
+   four most promising refitted fully). Evidence: share of the mismatch removed,
+   information criterion (dBIC with an effective number of observations), no loss on
+   the re-anchored closed-loop replay, consistency with the regimes where the effect
+   acts. Then *sets*: every pair of the most promising candidates and triples around
+   the best pair are refitted jointly, and the set with the lowest BIC in which every
+   member earns its place (:mod:`.sets`) gives the findings; nothing significant: no
+   finding -- unless the nominal replay failed or fits worse than a constant, which
+   is then an error with its cause (:mod:`.health`), never an all-clear.
 4. **Model and refit**: each finding's values are polished by the grey-box estimator
    (:mod:`.polish`) on the windows where it removes most of the mismatch; the
    augmented plant is replayed like the nominal one (``fit_after``) and written as
@@ -56,15 +59,17 @@ from ..params import PlantParams, atomic_write_text
 from ..plant import Plant
 from ..recording import Recording, fit
 from .candidates import Candidate, candidates as make_candidates
-from .data import Prepared, prepare
+from .data import Prepared, prepare, recorded_supply
 from .evidence import confidence, evidence_text
-from .explain import Chosen, Ranked, Refits, choose, promising, refit_fully, screen
+from .explain import Chosen, Ranked, Refits, promising, refit_fully, screen
+from .sets import search
+from .health import DiagnosisError, verdict
 from .locate import concentration, intervals, regimes, smooth_error
 from .predict import Predictor, horizons, segments
 from .refit import CandidateModel
 from .witness import Witness, observer_inputs
 
-__all__ = ["Finding", "Diagnosis", "diagnose", "replay", "EngineOpenLoop"]
+__all__ = ["Finding", "Diagnosis", "diagnose", "replay", "EngineOpenLoop", "DiagnosisError"]
 
 #: s: anchor spacing of the open-loop replay reported when there is no closed loop.
 OPEN_ANCHOR = 0.5
@@ -141,6 +146,9 @@ class Diagnosis:
     cost_after: float = float("nan")
     timings: dict[str, float] = field(default_factory=dict)
     polished: dict[str, Any] = field(default_factory=dict)
+    remaining: dict[str, dict[str, float]] = field(default_factory=dict)
+    unexplained: list[str] = field(default_factory=list)
+    sets: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """The diagnosis result of formats.md section 4 (exactly those keys)."""
@@ -165,6 +173,8 @@ class Diagnosis:
                 "error": r.result.error, "wall_s": r.result.wall_s, "evaluations": r.result.nfev}
                 for r in self.ranking],
             "grey_box_polish": self.polished,
+            "remaining_vs_noise": self.remaining, "unexplained": list(self.unexplained),
+            "sets": self.sets,
             "timings_s": self.timings,
         }
 
@@ -174,32 +184,47 @@ class Diagnosis:
             return ", ".join(f"{k} {v:.1f} %" for k, v in d.items())
         lines = [f"diagnosis of {self.recording_file} on {self.plant_file} ({self.mode})",
                  f"  fit before: {fits(self.fit_before)}"]
-        if not self.findings:
+        if not self.findings and not self.unexplained:
             lines.append("  no finding: the nominal model explains the recording within its "
                          "noise (no candidate is significant)")
+        elif not self.findings:
+            lines.append("  no finding: no candidate is significant, but the nominal model "
+                         "does not explain the recording (below)")
         for i, f in enumerate(self.findings, 1):
             par = ", ".join(f"{k} = {v:.4g}" for k, v in f.parameters.items())
             lines.append(f"  {i}. {f.effect} (confidence {f.confidence:.2f}): {par}")
             lines.append(f"     {f.evidence}")
         lines.append(f"  fit after:  {fits(self.fit_after)}")
+        if self.sets:
+            lines.append(f"  {self.sets.get('candidate_models', 0)} candidate models evaluated "
+                         "(single effects, pairs and triples)")
+        for n in self.unexplained:
+            lines.append(f"  still unexplained: {n}")
         for n in self.notes:
             lines.append(f"  note: {n}")
         return "\n".join(lines)
 
-    def write(self, out_dir: str | os.PathLike, report: bool = True) -> dict[str, Path]:
-        """Write diagnosis.json, plant.augmented.toml, details.json and report.html/.pdf."""
+    def write(self, out_dir: str | os.PathLike, report: bool = True,
+              inputs: Sequence[str | os.PathLike | None] = ()) -> dict[str, Path]:
+        """Write diagnosis.json, plant.augmented.toml, details.json and report.html/.pdf
+        (with its figures) as one result set (:func:`workbench.output.result_set`): all
+        of them, or -- on any failure -- nothing new in ``out_dir``. ``inputs`` (default
+        the plant and recording files) are never overwritten."""
+        from ..output import result_set
         out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        paths = {"json": out / "diagnosis.json", "plant": out / "plant.augmented.toml",
-                 "details": out / "details.json"}
-        atomic_write_text(paths["json"], json.dumps(self.to_dict(), indent=2) + "\n")
-        self.augmented.to_toml(paths["plant"])
-        atomic_write_text(paths["details"], json.dumps(_jsonable(self.details()), indent=1) + "\n")
-        if report:
-            from .report import write_report
-            html, pdf = write_report(self, out)
-            paths["html"], paths["pdf"] = html, pdf
-        return paths
+        names = {"json": "diagnosis.json", "plant": "plant.augmented.toml",
+                 "details": "details.json"}
+        ins = list(inputs) or [self.plant_file, self.recording_file]
+        with result_set(out, inputs=[i for i in ins if i]) as stage:
+            atomic_write_text(stage / names["json"], json.dumps(self.to_dict(), indent=2) + "\n")
+            self.augmented.to_toml(stage / names["plant"])
+            atomic_write_text(stage / names["details"],
+                              json.dumps(_jsonable(self.details()), indent=1) + "\n")
+            if report:
+                from .report import write_report
+                html, pdf = write_report(self, stage)
+                names["html"], names["pdf"] = Path(html).name, Path(pdf).name
+        return {k: out / v for k, v in names.items()}
 
 
 def _jsonable(v):
@@ -298,7 +323,7 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
         or "open".
     verbose : print progress (to stderr).
     max_nfev : least-squares iterations per candidate.
-    budget_s : stop looking for further findings after this wall time (s).
+    budget_s : after this wall time (s), no triples are refitted (pairs still are).
     polish_values : refine each finding's values with the grey-box estimator
         (:mod:`.polish`) on the windows where it removes most of the mismatch.
 
@@ -310,11 +335,17 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
     ------
     InputError
         Unusable input (see :func:`.data.prepare`).
+    DiagnosisError
+        The nominal replay fails (non-finite, piston beyond the stops) or fits a signal
+        worse than a constant and no candidate explains it, or the augmented replay
+        fails (:func:`.health.verdict`): never reported as "no finding".
     """
     clock = _Clock(verbose)
     plant, plant_file, recording, rec_file = _load(plant, recording)
     clock.restart()
+    plant, supply_notes = recorded_supply(plant, recording)
     prep = prepare(plant, recording, mode)
+    prep.notes[:0] = supply_notes
     params = plant.params
     clock.tick("prepare")
     # 1. replay on the nominal plant
@@ -336,10 +367,9 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
         clock.tick("best candidates refitted")
     # 4. choose findings (greedy) and polish their values
     by_name = {c.name: c for c in cands}
-    chosen = choose(refits, cands, ranking, max_nfev, nothing,
-                    lambda: budget_s is not None and clock.elapsed() > budget_s)
-    if chosen.ranked:
-        clock.tick("further findings")
+    chosen, sets_info = search(refits, cands, ranking, max_nfev, nothing,
+                               lambda: budget_s is not None and clock.elapsed() > budget_s)
+    clock.tick(f"sets of explanations ({sets_info['candidate_models']} candidate models)")
     polished: dict[str, Any] = {}
     if polish_values and chosen.ranked:
         polished = _polish_findings(prep, params, chosen.ranked, by_name, nom.err)
@@ -351,11 +381,13 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
         witness_after = _witness_after(prep, nom.wit, aug, jit)
     if findings:
         clock.tick("augmented replay")
+    remaining, still, notes = verdict(prep, sim0, [f.effect for f in findings], sim_after,
+                                      nom.masks, _no_finding_note(ranking))
     return Diagnosis(
         plant_file=plant_file, recording_file=rec_file, fit_before=fit_before,
         fit_after=findings[-1].fit_after if findings else dict(fit_before), findings=findings,
         ranking=ranking, located=nom.located, regime_share=nom.share,
-        notes=list(prep.notes) + ([] if findings else _no_finding_note(ranking)),
+        notes=notes, remaining=remaining, unexplained=still, sets=sets_info,
         mode=_mode_text(prep), nominal=params, augmented=aug, prep=prep, replay_nominal=sim0,
         replay_augmented=sim_after, witness=nom.witness, witness_after=witness_after,
         err_nominal=nom.err, err_after=chosen.err if findings else None, cost_nominal=nom.cost,

@@ -22,7 +22,8 @@ from ..plant import Plant
 from ..recording import Recording
 from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
 
-__all__ = ["Prepared", "prepare", "MIN_DURATION", "SHORT_DURATION", "savgol"]
+__all__ = ["Prepared", "prepare", "uniform", "recorded_supply", "MIN_DURATION",
+           "SHORT_DURATION", "savgol"]
 
 #: s: shorter recordings are refused (a few closed-loop time constants at least).
 MIN_DURATION = 2.0
@@ -188,6 +189,56 @@ def _controller_agreement(plant: Plant, controller: Any, rec: Recording, x: np.n
     return fit(u_rec, u_pred) if np.ptp(u_rec) > 0 else 100.0
 
 
+#: Recorded columns held (zero-order) when resampling: the command and reference are
+#: outputs held between updates; the measurements are interpolated.
+HELD = ("u", "r")
+
+
+def uniform(rec: Recording, dt: float) -> Recording:
+    """``rec`` on a uniform grid of period ``dt`` (s) from its first sample: measured
+    columns interpolated linearly, :data:`HELD` columns held from the last sample at or
+    before each grid time."""
+    t = np.asarray(rec.t, dtype=float)
+    grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+    cols = {}
+    for name in rec.columns:
+        if name == "t":
+            continue
+        y = np.asarray(rec[name], dtype=float)
+        if name in HELD:
+            idx = np.clip(np.searchsorted(t, grid + 1e-12 * dt, side="right") - 1, 0, len(t) - 1)
+            cols[name] = y[idx]
+        else:
+            cols[name] = np.interp(grid, t, y)
+    meta = dict(getattr(rec, "metadata", {}) or {})
+    meta["sample_time"] = repr(float(dt))
+    return Recording.from_arrays(grid, source=rec.source, metadata=meta, **cols)
+
+
+def recorded_supply(plant: Plant, rec: Recording) -> tuple[Plant, list[str]]:
+    """The plant with the recorded supply pressure ``p_s`` (its median, Pa) when the
+    recording has one and the plant has no supply droop, and notes: the value used, and
+    a sag under flow (which the supply_droop candidate models) when p_s varies."""
+    if "p_s" not in rec:
+        return plant, []
+    ps = np.asarray(rec["p_s"], dtype=float)
+    med = float(np.median(ps))
+    nominal = float(plant.params["supply.pressure"])
+    notes = []
+    if plant.params.has_effect("supply_droop"):
+        return plant, [f"recorded supply pressure p_s (median {med / 1e5:.3g} bar) shown, not "
+                       "used: the plant file models the supply as a reservoir"]
+    if abs(med - nominal) > 0.005 * nominal:
+        plant = Plant(plant.params.replace(**{"supply.pressure": med}), friction=plant.friction)
+        notes.append(f"the recorded supply pressure p_s (median {med / 1e5:.4g} bar) is used "
+                     f"instead of the plant file's {nominal / 1e5:.4g} bar")
+    sag = float(np.percentile(ps, 99) - np.percentile(ps, 1))
+    if sag > 0.03 * med:
+        notes.append(f"the recorded supply pressure varies by {sag / 1e5:.3g} bar "
+                     f"({100 * sag / med:.0f} %): it sags under flow (see supply_droop)")
+    return plant, notes
+
+
 def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
     """Check the recording against the plant and prepare the signals.
 
@@ -214,10 +265,18 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
                          source=src)
     steps = np.diff(t)
     dt = float(np.median(steps))
+    if not np.all(steps > 0):
+        raise InputError("the time column t must increase strictly from sample to sample",
+                         source=src, location="column 't'")
     if np.max(np.abs(steps - dt)) > 0.05 * dt:
-        notes.append(f"the sample time varies (median {dt * 1e3:.3g} ms, range "
-                     f"{steps.min() * 1e3:.3g}..{steps.max() * 1e3:.3g} ms); the signals are "
-                     "treated as equally spaced")
+        dt = float((t[-1] - t[0]) / (n - 1))     # the mean step: jitter averages out
+        notes.append(f"the sample time varies (mean {dt * 1e3:.3g} ms, range "
+                     f"{steps.min() * 1e3:.3g}..{steps.max() * 1e3:.3g} ms): the recording is "
+                     f"resampled on a uniform {dt * 1e3:.3g} ms grid (measurements linearly "
+                     "interpolated, the command and reference held as a logger's outputs are)")
+        rec = uniform(rec, dt)
+        t = np.asarray(rec.t, dtype=float) - float(rec.t[0])
+        n = len(t)
     if rec.duration < SHORT_DURATION:
         notes.append(f"short recording ({rec.duration:.3g} s): few events to learn from, "
                      "so weak effects may go unnoticed")

@@ -60,6 +60,14 @@ _SX_LIMIT = 16
 #: Samples per compiled chunk.
 CHUNK = 1000
 
+#: A sample whose step leaves the physical states is redone with this many times
+#: smaller steps.
+REFINE = 8
+#: Physical bounds of any pressure state: above P_FLOOR x atmospheric, below
+#: P_CEIL x supply pressure.
+P_FLOOR = 0.02
+P_CEIL = 2.0
+
 
 @dataclass(frozen=True)
 class EngineInputs:
@@ -74,8 +82,9 @@ class EngineInputs:
         return EngineInputs(d)
 
 
-def _ros2_step(plant: Plant, h: float, substeps: int) -> ca.Function:
-    """z_{k+1} = ROS2(z_k, u, p) over one sample (``substeps`` steps of h/substeps).
+def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step"
+               ) -> ca.Function:
+    """z_{k+1} = ROS2(z_k, u, p): one step of h/substeps (:func:`_repeated` chains them).
 
     Dry friction is stepped on its own (the Karnopp switch of the plant's ``f`` would
     put the two stages of a step on different branches): during a step the friction
@@ -142,16 +151,64 @@ def _ros2_step(plant: Plant, h: float, substeps: int) -> ca.Function:
         crossed = ca.logic_and(v0 != 0, v0 * v1 <= 0)
         held = ca.fabs(drive(z_rest)) <= fs
         zn = ca.if_else(ca.logic_or(stuck, ca.logic_and(crossed, held)), z_rest, zn)
-    one = ca.Function("ros2_substep", [z, u, p], [zn])
-    if substeps == 1:
-        return ca.Function("ros2", [z, u, p], [zn])
-    zm = ca.MX.sym("z", nx)
-    um = ca.MX.sym("u")
-    pm = ca.MX.sym("p", len(plant.p0))
+    return ca.Function(name, [z, u, p], [zn])
+
+
+def _repeated(one: ca.Function, n: int, nx: int, npar: int) -> ca.Function:
+    """``n`` steps of ``one`` (z, u, p) -> z in a row."""
+    zm, um, pm = ca.MX.sym("z", nx), ca.MX.sym("u"), ca.MX.sym("p", npar)
     zk = zm
-    for _ in range(substeps):
+    for _ in range(n):
         zk = one(zk, um, pm)
-    return ca.Function("ros2", [zm, um, pm], [zk])
+    return ca.Function(f"{one.name()}_x{n}", [zm, um, pm], [zk])
+
+
+def _implausible(plant: Plant, z0, z1) -> ca.MX:
+    """1 where the step z0 -> z1 left the physically possible states: a non-finite
+    value, a pressure below :data:`P_FLOOR` of the atmosphere or above
+    :data:`P_CEIL` of the supply, a pressure that moved by more than half the supply
+    pressure in one step (the linearly implicit step overshooting the valve law's
+    square root), or the piston further than 5 % of the stroke beyond an end stop."""
+    prm = plant.params
+    p_atm, p_s = prm["gas.atmospheric_pressure"], prm["supply.pressure"]
+    bad = ca.MX(0)
+    for i in range(z1.shape[0]):            # NaN < inf is false as well
+        bad = ca.logic_or(bad, ca.logic_not(ca.fabs(z1[i]) < np.inf))
+    for i in plant.states_of_kind("pressure"):
+        bad = ca.logic_or(bad, z1[i] < P_FLOOR * p_atm)
+        bad = ca.logic_or(bad, z1[i] > P_CEIL * p_s)
+        bad = ca.logic_or(bad, ca.fabs(z1[i] - z0[i]) > 0.5 * p_s)
+    ix, L = plant.state_index("x"), plant.stroke
+    bad = ca.logic_or(bad, ca.logic_or(z1[ix] < -0.05 * L, z1[ix] > 1.05 * L))
+    return bad
+
+
+def _project(plant: Plant, z):
+    """The pressures clipped into [P_FLOOR p_atm, P_CEIL p_s] (last resort after the
+    refined step, so that a replay stays bounded rather than overflowing)."""
+    prm = plant.params
+    lo, hi = P_FLOOR * prm["gas.atmospheric_pressure"], P_CEIL * prm["supply.pressure"]
+    idx = set(plant.states_of_kind("pressure"))
+    return ca.vertcat(*[ca.fmin(ca.fmax(z[i], lo), hi) if i in idx else z[i]
+                        for i in range(z.shape[0])])
+
+
+def _guarded_step(plant: Plant, h: float, substeps: int) -> ca.Function:
+    """z_{k+1} over one sample: ``substeps`` ROS2 steps; where a step leaves the
+    physically possible states (:func:`_implausible`: at an end stop the chamber
+    shrinks to its dead volume and its pressure time constant to well under a step),
+    that sample is redone with :data:`REFINE` times smaller steps (evaluated only
+    then), and its pressures are kept within their physical bounds."""
+    nx, npar = len(plant.states), len(plant.p0)
+    coarse_one = _ros2_step(plant, h, substeps, "ros2_coarse")
+    fine_one = _ros2_step(plant, h, substeps * REFINE, "ros2_fine")
+    coarse = coarse_one if substeps == 1 else _repeated(coarse_one, substeps, nx, npar)
+    fine = _repeated(fine_one, substeps * REFINE, nx, npar)
+    zm, um, pm = ca.MX.sym("z", nx), ca.MX.sym("u"), ca.MX.sym("p", npar)
+    zc = coarse(zm, um, pm)
+    zf = fine(zm, um, pm)
+    zn = ca.if_else(_implausible(plant, zm, zc), _project(plant, zf), zc, True)
+    return ca.Function("ros2", [zm, um, pm], [zn])
 
 
 def _hidden_rest(plant: Plant, z, u_prev, p):
@@ -183,7 +240,7 @@ class Engine:
         self.chunk = int(chunk)
         nx = len(plant.states)
         npar = len(plant.p0)
-        step = _ros2_step(plant, self.h, substeps)
+        step = _guarded_step(plant, self.h, substeps)
         zs = ca.MX.sym("z", nx)
         cs = ca.MX.sym("c", 3)          # previous error, integral, held command
         inp = ca.MX.sym("in", len(INPUT_ROWS))

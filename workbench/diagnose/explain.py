@@ -15,11 +15,16 @@ Evidence for a candidate with k fitted values, from its refit (:mod:`.refit`):
   where the effect acts (:mod:`.locate`), against the share of time spent there.
 
 A candidate is *significant* when its dBIC exceeds :data:`DBIC_MIN` and it removes
-at least :data:`GAIN_MIN` of the mismatch. The winner is the significant candidate
-with the largest dBIC; further effects are added greedily while they stay
-significant on top of the ones found: :func:`screen` (every candidate, a short
-refit), :func:`refit_fully` (the :func:`promising` ones), :func:`choose` (the greedy
-choice of findings).
+at least :data:`GAIN_MIN` of the mismatch: :func:`screen` (every candidate, a short
+refit), :func:`refit_fully` (the :func:`promising` ones). A fitted value at the edge
+of its range is *not* a veto but reported ("at range edge": the range may be too
+small, or the model form cannot reach the data): secondary shape values (Stribeck
+velocity, static excess, cross-piston leak) legitimately sit at a bound when the
+recording does not identify them, and a veto would discard real effects; the
+evidence that matters (dBIC, share removed, closed loop) is judged all the same.
+The findings are chosen among *sets* of candidates refitted jointly (:mod:`.sets`);
+:func:`choose` is the former greedy choice (the best significant candidate, then
+others added one by one while significant on top), kept for comparison.
 """
 
 from __future__ import annotations

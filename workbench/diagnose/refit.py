@@ -17,6 +17,7 @@ For one :class:`~.candidates.Candidate` on the nominal plant:
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -77,6 +78,7 @@ class FitResult:
     at_bound: list[str] = field(default_factory=list)
     error: str | None = None
     err: np.ndarray | None = field(default=None, repr=False)
+    corr: dict[tuple[str, str], float] = field(default_factory=dict)
 
 
 class CandidateModel:
@@ -154,14 +156,14 @@ def fit_candidate(prep: Prepared, params: PlantParams, cand: Candidate, shpe: Pr
     z, J, message = _least_squares(obj, z0, max_nfev)
     vals = cand.values(z)
     Y = model.run(shpe, vals)
-    std, ci = _uncertainty(cand.free, vals, J, shpe.residuals(Y), shpe.n_eff)
+    std, ci, corr = _uncertainty(cand.free, vals, J, shpe.residuals(Y), shpe.n_eff)
     seg_cost = seg.cost(model.run(seg, vals)) if seg is not None else None
     return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values=vals, std=std, ci95=ci,
                      cost=shpe.cost(Y), signal_costs=shpe.signal_costs(Y), seg_cost=seg_cost,
                      grid=grid, fits=shpe.fits(Y), plant_values=cand.plant_values(vals),
                      nfev=obj.nfev, wall_s=time.perf_counter() - t0, message=str(message),
                      at_bound=_at_bound(cand.free, z, obj.lo, obj.hi),
-                     err=shpe.error_by_sample(Y).astype(np.float32))
+                     err=shpe.error_by_sample(Y).astype(np.float32), corr=corr)
 
 
 class _Objective:
@@ -232,8 +234,10 @@ def _least_squares(obj: _Objective, z0: np.ndarray, max_nfev: int
 
 def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
                  r: np.ndarray, n_eff: float
-                 ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
-    """Standard deviations and 95 % intervals of the fitted values (their units).
+                 ) -> tuple[dict[str, float], dict[str, tuple[float, float]],
+                            dict[tuple[str, str], float]]:
+    """Standard deviations, 95 % intervals (their units) and pairwise correlations of
+    the fitted values.
 
     Gauss-Newton covariance ``pinv(J' J) s2`` in optimiser coordinates, the residual
     variance ``s2`` inflated by the correlation of the residuals within a window
@@ -248,7 +252,7 @@ def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
     try:
         cov = np.linalg.pinv(J.T @ J) * s2 * infl
     except np.linalg.LinAlgError:                           # pragma: no cover
-        return std, ci
+        return std, ci, {}
     for i, f in enumerate(free):
         sz = math.sqrt(max(cov[i, i], 0.0))
         v = vals[f.key]
@@ -258,7 +262,12 @@ def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
         else:
             std[f.key] = f.scale * sz
             ci[f.key] = (v - 1.96 * f.scale * sz, v + 1.96 * f.scale * sz)
-    return std, ci
+    corr: dict[tuple[str, str], float] = {}
+    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    for i, j in itertools.combinations(range(len(free)), 2):
+        if d[i] > 0 and d[j] > 0:
+            corr[(free[i].key, free[j].key)] = float(cov[i, j] / (d[i] * d[j]))
+    return std, ci, corr
 
 
 def _at_bound(free: Sequence[Free], z: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[str]:

@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import report as rp
 from ..params import EFFECTS
+from .explain import DBIC_MIN
 
 __all__ = ["write_report", "build_report"]
 
@@ -22,7 +23,8 @@ def _ci_text(ci) -> str:
 
 def build_report(d) -> rp.Report:
     """The :class:`workbench.report.Report` of a :class:`~.core.Diagnosis`."""
-    sections = [_summary_section(d), _findings_section(d), _replay_section(d),
+    sections = [_summary_section(d), _findings_section(d), _remaining_section(d),
+                _replay_section(d),
                 _signatures_section(d), _candidates_section(d)]
     title = "Mismatch diagnosis"
     return rp.Report(title, subtitle=f"{Path(d.recording_file).name} on {Path(d.plant_file).name}",
@@ -35,6 +37,9 @@ def build_report(d) -> rp.Report:
 
 def _status(d) -> rp.Status:
     """The report's verdict: what was found and how the fit changed, or no finding."""
+    if not d.findings and d.unexplained:
+        return rp.Status("FAIL", "no candidate is significant, but the nominal model does not "
+                                 "explain the recording within its noise (see 'What remains')")
     if not d.findings:
         return rp.Status("NOTE", "no significant mismatch: the nominal model explains the "
                                  "recording within its noise (no finding)")
@@ -77,15 +82,65 @@ def _findings_section(d) -> rp.Section:
             "plant.augmented.toml equals the nominal plant.")])
     rows = []
     for i, f in enumerate(d.findings, 1):
-        rows.append([i, f.effect, f.confidence,
+        rows.append([i, f.effect, round(float(f.confidence), 2),
                      ", ".join(f"{k} = {rp.fmt(v)}" for k, v in f.parameters.items()),
                      "; ".join(f"{a:.2f}-{b:.2f} s" for a, b in f.where[:6])
                      + (" ..." if len(f.where) > 6 else "")])
     fb = [rp.Table(["#", "effect", "confidence", "parameters (SI)", "where"], rows,
                    caption="Findings, most important first")]
+    fb += _set_blocks(d)
     for i, f in enumerate(d.findings, 1):
         fb += _finding_blocks(i, f, d.polished.get(f.name))
     return rp.Section("Findings", fb)
+
+
+def _set_blocks(d) -> list:
+    """The chosen set: each member's own share, what the set leaves, the trade-offs."""
+    info = d.sets or {}
+    best = next((s for s in info.get("sets", []) if s["set"] == sorted(info.get("chosen", []))),
+                None)
+    if not best:
+        return []
+    out = [rp.Paragraph(
+        f"Chosen among {info.get('candidate_models', 0)} candidate models (single effects, "
+        "pairs and triples refitted jointly) as the set with the lowest BIC in which every "
+        "member earns its place. Own share: the part of the nominal short-horizon mismatch "
+        "only that member removes (the set without it, refitted, leaves that much more); "
+        f"the set leaves {rp.fmt(100 * best['cost'] / max(d.cost_nominal, 1e-300))} % of it.")]
+    rest = best.get("own_share_of_rest", {})
+    rows = [[m, round(100 * float(v), 2), round(100 * float(rest.get(m, float("nan"))), 1)]
+            for m, v in best["own_share"].items()]
+    out.append(rp.Table(["member", "own share of the nominal mismatch",
+                         "of what the others leave"], rows, units=["", "%", "%"],
+                        caption="Each finding's own share: what only it removes"))
+    for alt in info.get("alternatives", []):
+        out.append(rp.Status("NOTE", "an alternative explains the recording about as well "
+                                     f"(BIC within {DBIC_MIN:g}): {' + '.join(alt)}; the data cannot "
+                                     "tell it from the chosen set"))
+    for t in info.get("trade_offs", []):
+        out.append(rp.Status("NOTE", f"{t['values'][0]} and {t['values'][1]} trade off "
+                                     f"(correlation {t['correlation']:+.2f}): {t['tells_apart']}"))
+    return out
+
+
+def _remaining_section(d) -> rp.Section:
+    """The final model's replay error against the noise floor, per signal and regime."""
+    if not d.remaining:
+        return rp.Section("What remains", [rp.Paragraph("No replay to compare.")])
+    regimes = [k for k in next(iter(d.remaining.values())) if k not in ("fit", "floor", "ratio")]
+    rows = [[s, round(r["fit"], 1), r["floor"], round(r["ratio"], 1)]
+            + [None if r.get(g) is None else round(r[g], 1) for g in regimes]
+            for s, r in d.remaining.items()]
+    blocks = [rp.Table(["signal", "fit", "noise floor", "error / noise"] + regimes, rows,
+                       units=["", "%", "%", "-"] + ["-"] * len(regimes),
+                       caption="The replay of the final model against the noise floor (the fit "
+                               "a perfect model reaches, from the recording's own noise), and "
+                               "its error in noise units per operating regime")]
+    for n in d.unexplained:
+        blocks.append(rp.Status("NOTE", "still unexplained: " + n))
+    if not d.unexplained:
+        blocks.append(rp.Paragraph("Every signal is replayed within a few times its noise."))
+    return rp.Section("What remains", blocks)
 
 
 def _finding_blocks(i: int, f, pol: dict | None) -> list:
@@ -154,6 +209,12 @@ def _signatures_section(d) -> rp.Section:
     return rp.Section("Residual signatures and location", sb)
 
 
+def _clean(v):
+    """``v`` rounded to 6 decimals (a BIC weight of exp(-700) is 0, and denormal floats
+    cannot be formatted)."""
+    return None if v is None else round(float(v), 6)
+
+
 def _candidates_section(d) -> rp.Section:
     """Every candidate's evidence (table and bar chart), best first."""
     from . import figures
@@ -162,9 +223,11 @@ def _candidates_section(d) -> rp.Section:
         vals = ", ".join(f"{k.split('.', 1)[-1]} = {rp.fmt(v, digits=3)}"
                          for k, v in r.result.values.items())
         rows.append([r.name.replace("parameter_error:", "parameter_error: "),
-                     "yes" if r.significant else "no", 100 * r.gain, r.dbic if np.isfinite(r.dbic)
-                     else None, None if r.seg_gain is None else 100 * r.seg_gain,
-                     r.consistency, r.weight, vals, r.reason or r.result.error or ""])
+                     "yes" if r.significant else "no", _clean(100 * r.gain),
+                     r.dbic if np.isfinite(r.dbic) else None,
+                     None if r.seg_gain is None else _clean(100 * r.seg_gain),
+                     _clean(r.consistency), _clean(r.weight), vals,
+                     r.reason or r.result.error or ""])
     cb = [rp.Paragraph(
         "Every candidate is added to the nominal plant and refitted on short-horizon "
         "predictions. gain: share of the prediction error it removes; dBIC: information "

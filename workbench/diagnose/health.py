@@ -1,0 +1,244 @@
+"""Is a replay usable, and what does it leave unexplained?
+
+Two questions the diagnosis must answer before it may say anything:
+
+* :func:`check_replay` -- did the replay of the recording on a plant work at all?
+  A replay with non-finite values, a piston far beyond its end stops (which the plant's
+  stiff stops make impossible for a working replay) or a fit worse than the recording's
+  own mean (fit < 0 %, formats.md section 4) is not a model that "explains the
+  recording"; :func:`core.diagnose` turns such a replay into a finding's motivation or,
+  when no candidate explains it, into :class:`DiagnosisError` with the cause -- never
+  into "no finding".
+* :func:`unexplained` -- the **noise floor** of each signal: the fit a perfect model
+  would reach on this recording, ``100 (1 - sigma / std(y))`` with ``sigma`` the
+  sensor noise estimated from the recording itself (:func:`workbench.signals.noise_floor`),
+  compared with the fit reached, and the operating regime where the remaining error
+  concentrates (:mod:`.locate`), in a sentence.
+
+Examples
+--------
+>>> import numpy as np
+>>> floor_fit(np.sin(np.linspace(0, 6, 600)), 0.01)      # % a perfect model reaches
+98.6
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import WorkbenchError
+from ..signals import fit
+from .data import Prepared
+
+__all__ = ["DiagnosisError", "ReplayCheck", "check_replay", "floor_fit", "unexplained", "verdict",
+           "STROKE_MARGIN", "UNEXPLAINED_RATIO"]
+
+#: Share of the stroke beyond an end stop that no working replay reaches (the stops'
+#: contact at 300 Hz lets a 1 m/s piston in by well under 1 mm).
+STROKE_MARGIN = 0.05
+#: A signal is "still unexplained" when its replay error is more than this many times
+#: the error a perfect model would leave (the noise): a model error of the size of the
+#: noise doubles the error energy only at a ratio of sqrt(2); 3 is well clear of it.
+UNEXPLAINED_RATIO = 3.0
+
+
+class DiagnosisError(WorkbenchError):
+    """The diagnosis cannot give an answer it can stand behind (the replay failed, or
+    fits the recording worse than a constant and no candidate explains why)."""
+
+
+@dataclass
+class ReplayCheck:
+    """What is wrong with one replay (empty lists: nothing).
+
+    Attributes
+    ----------
+    failures : the replay itself broke (non-finite values, piston beyond the stops).
+    worse : signals fitted worse than the recording's mean, ``"x -128 %"``.
+    fits : fit per signal, % (NaN where undefined).
+    """
+
+    failures: list[str] = field(default_factory=list)
+    worse: list[str] = field(default_factory=list)
+    fits: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """Neither a failure nor a signal worse than a constant."""
+        return not self.failures and not self.worse
+
+    def cause(self) -> str:
+        """Everything wrong, in one sentence (empty when :attr:`ok`)."""
+        parts = list(self.failures)
+        if self.worse:
+            parts.append("it fits " + ", ".join(self.worse)
+                         + " (worse than the recording's own mean, a constant)")
+        return "; ".join(parts)
+
+
+def _spans(t: np.ndarray, mask: np.ndarray) -> str:
+    """``mask``'s first and last time, e.g. ``"6.44-8.00 s"``."""
+    idx = np.flatnonzero(mask)
+    return f"{t[idx[0]]:.2f}-{t[idx[-1]]:.2f} s"
+
+
+def check_replay(t: np.ndarray, measured: Mapping[str, np.ndarray],
+                 sim: Mapping[str, np.ndarray], stroke: float,
+                 signals: Sequence[str]) -> ReplayCheck:
+    """Check the replay ``sim`` of the recording (arrays on its samples).
+
+    Parameters
+    ----------
+    t : s. measured : recorded signals by name. sim : replayed signals by name.
+    stroke : m. signals : the signals compared (x, and p_a, p_b when recorded).
+
+    Returns
+    -------
+    ReplayCheck
+    """
+    chk = ReplayCheck()
+    for s in signals:
+        y = np.asarray(sim[s], dtype=float)
+        bad = ~np.isfinite(y)
+        if bad.any():
+            chk.failures.append(f"the replayed {s} is not finite at {int(bad.sum())} samples "
+                                f"({_spans(t, bad)})")
+            chk.fits[s] = float("nan")
+            continue
+        chk.fits[s] = fit(np.asarray(measured[s], dtype=float), y)
+        if np.isfinite(chk.fits[s]) and chk.fits[s] < 0.0:
+            chk.worse.append(f"{s} at {chk.fits[s]:.3g} %")
+    x = np.asarray(sim["x"], dtype=float)
+    out = np.isfinite(x) & ((x < -STROKE_MARGIN * stroke) | (x > (1 + STROKE_MARGIN) * stroke))
+    if out.any():
+        worst = float(np.max(np.abs(np.clip(x[out], -np.inf, 0.0))
+                             + np.clip(x[out] - stroke, 0.0, np.inf)))
+        chk.failures.append(f"the replayed piston leaves the stroke [0, {stroke:g}] m by up "
+                            f"to {worst:.3g} m ({_spans(t, out)})")
+    return chk
+
+
+def floor_fit(y: np.ndarray, sigma: float) -> float:
+    """The fit (%) a model without any error reaches on ``y`` measured with noise
+    ``sigma``: ``100 (1 - sigma / std(y))``, rounded to 0.1 %."""
+    sd = float(np.std(np.asarray(y, dtype=float)))
+    if sd <= 0.0:
+        return float("nan")
+    return round(100.0 * (1.0 - sigma / sd), 1)
+
+
+def unexplained(measured: Mapping[str, np.ndarray], sim: Mapping[str, np.ndarray],
+                noise: Mapping[str, float], masks: Mapping[str, np.ndarray],
+                signals: Sequence[str], label: str = "the augmented model"
+                ) -> tuple[dict[str, dict[str, float]], list[str]]:
+    """Per signal: fit reached, noise-floor fit, error / noise ratio overall and per
+    operating regime; and the plain statements for the signals still unexplained
+    (error above :data:`UNEXPLAINED_RATIO` times the noise).
+
+    Returns
+    -------
+    table : signal -> {"fit", "floor", "ratio", and one ratio per regime}.
+    statements : sentences, e.g. ``"p_a fit 74.0 %, the noise floor allows 95.1 %:
+        the remaining mismatch is largest at velocity reversal (9.1 x the noise)"``.
+    """
+    table: dict[str, dict[str, float]] = {}
+    said: list[str] = []
+    for s in signals:
+        y = np.asarray(measured[s], dtype=float)
+        e = y - np.asarray(sim[s], dtype=float)
+        ok = np.isfinite(e)
+        sig = max(float(noise.get(s, 0.0)), 1e-300)
+        if ok.sum() < 3:
+            continue
+        row = {"fit": fit(y[ok], y[ok] - e[ok]), "floor": floor_fit(y[ok], sig),
+               "ratio": float(np.sqrt(np.mean(e[ok] ** 2)) / sig)}
+        worst, worst_r = "", 0.0
+        for name, m in masks.items():
+            mm = m & ok
+            if mm.sum() < 10:
+                continue
+            r = float(np.sqrt(np.mean(e[mm] ** 2)) / sig)
+            row[name] = r
+            if r > worst_r:
+                worst, worst_r = name, r
+        table[s] = row
+        if row["ratio"] > UNEXPLAINED_RATIO:
+            where = (f": the remaining mismatch is largest {_at(worst)} ({worst_r:.1f} x the "
+                     f"noise)") if worst else ""
+            said.append(f"{s}: {label} fits {row['fit']:.1f} %, the noise floor allows "
+                        f"{row['floor']:.1f} % (error {row['ratio']:.1f} x the noise){where}")
+    return table, said
+
+
+def _at(regime: str) -> str:
+    """'at rest' stays, others get 'at' / 'when': words for the statement."""
+    if regime.startswith("at ") or regime.startswith("near "):
+        return regime
+    if regime in ("moving", "accelerating"):
+        return f"while {regime}"
+    return f"at {regime}s" if regime == "velocity reversal" else f"in {regime}s"
+
+
+def _check(prep: Prepared, sim: Mapping[str, np.ndarray]) -> ReplayCheck:
+    """:func:`check_replay` of a replay of the prepared recording."""
+    return check_replay(prep.t, {s: prep.measured(s) for s in prep.signals}, sim,
+                        prep.plant.stroke, prep.signals)
+
+
+def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[str],
+            sim_after: Mapping[str, np.ndarray], masks: Mapping[str, np.ndarray],
+            no_finding: Sequence[str] = ()
+            ) -> tuple[dict[str, dict[str, float]], list[str], list[str]]:
+    """Never a silent all-clear.
+
+    Parameters
+    ----------
+    prep : the prepared recording. sim0 : its replay on the nominal plant.
+    findings : effect names found (in order). sim_after : the replay with them ({} if none).
+    masks : operating regimes (:func:`.locate.regimes`).
+    no_finding : why no candidate was significant (a note), when there is no finding.
+
+    Returns
+    -------
+    remaining : :func:`unexplained`'s table for the final model (nominal or augmented).
+    statements : the signals still unexplained, in words.
+    notes : the recording's notes and what this check adds.
+
+    Raises
+    ------
+    DiagnosisError
+        The nominal replay failed or fits a signal worse than a constant and there is no
+        finding; or the augmented replay fails (non-finite, piston beyond the stops).
+    """
+    notes = list(prep.notes)
+    check0 = _check(prep, sim0)
+    if not findings:
+        if not check0.ok:
+            raise DiagnosisError(
+                "the nominal plant does not reproduce the recording and no candidate "
+                f"explains why: {check0.cause()}. "
+                + "".join(f"{n}. " for n in no_finding)
+                + "Check the plant file (units, supply, valve size, stroke, controller) "
+                  "and the recording's columns against formats.md sections 1-3.")
+        notes += list(no_finding)
+        sim, label = sim0, "the nominal model"
+    else:
+        check1 = _check(prep, sim_after)
+        if check1.failures:
+            raise DiagnosisError(
+                "the plant augmented by " + ", ".join(findings)
+                + f" cannot be replayed on the recording: {check1.cause()}")
+        if not check0.ok and check1.ok:
+            notes.append(f"the nominal replay failed ({check0.cause()}); the findings "
+                         "explain it")
+        elif not check0.ok:
+            notes.append(f"the nominal replay failed ({check0.cause()})")
+        if check1.worse:
+            notes.append(f"even with the findings the replay {check1.cause()}")
+        sim, label = sim_after, "the augmented model"
+    remaining, still = unexplained({s: prep.measured(s) for s in prep.signals}, sim,
+                                   prep.noise, masks, prep.signals, label)
+    return remaining, still, notes

@@ -1,0 +1,325 @@
+"""Explanations as *sets*: pairs and triples of effects and nominal-value corrections
+refitted jointly and compared on one footing.
+
+A rig rarely has one missing effect. After every candidate was refitted alone
+(:mod:`.explain`), pairs are refitted **jointly** (all their values free at once,
+started from the single fits): the best single with every other candidate (a weak
+second effect may rank low alone, behind proxies of the first) and every pair of the
+most promising ones (:data:`POOL`); then triples: the best pair with each of those
+and of the members of the next best pairs. Like the singles, every set is first
+refitted briefly (:data:`~.explain.SCREEN_NFEV` iterations) and only the best
+(:data:`FULL_SETS` pairs, one triple) fully. Every set ``S`` -- the nominal
+model, singles, pairs, triples -- is scored by the same Bayesian information
+criterion on the short-horizon prediction cost ``J_S`` (mean squared residual in
+units of the recording's own noise estimate, :mod:`.predict`)::
+
+    BIC(S) = n ln J_S + k_S ln n
+
+with ``n`` the effective number of independent observations and ``k_S`` the values
+fitted. The chosen set has the lowest BIC among those in which **every member
+earns its place**: leaving it out (the set without it, also refitted) costs at least
+:data:`~.explain.DBIC_MIN`, i.e. the member is significant *given the others*
+(a member that only re-describes another's effect, or a wrong nominal value mistaken
+for new physics, fails this). ``parameter_error`` candidates (mass, viscous friction,
+valve conductance, supply pressure) are members like any effect, so wrong nominal
+values compete with new physics on the same footing.
+
+Each member's **own share** is ``(J_{S without m} - J_S) / J_0`` (the part of the
+nominal mismatch only it removes), also given as a share of what the others leave,
+``(J_{S without m} - J_S) / J_{S without m}``; ``J_S / J_0`` is what the set still leaves.
+**Trade-offs**: values of two members whose joint-fit correlation exceeds
+:data:`TRADE_OFF` are reported with the operating regimes that separate them, and
+*alternatives* -- other sets whose members all earn their place, within
+:data:`~.explain.DBIC_MIN` of the chosen one's BIC -- as explanations the recording
+cannot tell apart.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from .candidates import Candidate
+from .explain import DBIC_MIN, GAIN_MIN, SCREEN_NFEV, SEG_WORSE, Chosen, Ranked, Refits
+from .locate import EXPECTED
+from .refit import FitResult
+
+__all__ = ["Combined", "combine", "SetScore", "search", "by_member", "trade_offs", "POOL",
+           "TRADE_OFF", "MIN_REMOVED"]
+
+#: Candidates combined into pairs and triples (the best singles by information criterion).
+POOL = 4
+#: Pairs refitted fully after their screening refit (the best by BIC; then the best triple).
+FULL_SETS = 3
+#: Smallest short-horizon cost a member must remove, in noise units: one signal's noise
+#: variance (the cost is the mean squared residual over the noise, summed over signals).
+MIN_REMOVED = 1.0
+#: |correlation| of two members' fitted values above which they are reported as trading off.
+TRADE_OFF = 0.8
+
+
+@dataclass(frozen=True)
+class Combined(Candidate):
+    """Several candidates fitted together (their values all free at once)."""
+
+    members: tuple[Candidate, ...] = ()
+
+    def split(self, values: Mapping[str, float]) -> list[dict[str, float]]:
+        """The fitted values of each member (candidate keys)."""
+        return [{f.key: values[f.key] for f in m.free if f.key in values} for m in self.members]
+
+    def grid_points(self) -> list[dict[str, float]]:
+        """Every member at its start value, then the scanned member's grid."""
+        return [{}] + (super().grid_points() if self.grid else [])
+
+    def plant_values(self, values: Mapping[str, float]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for m, v in zip(self.members, self.split(values)):
+            out.update(m.plant_values(v))
+        return out
+
+
+def combine(members: Sequence[Candidate], starts: Mapping[str, float] | None = None,
+            scan: Candidate | None = None) -> Combined | None:
+    """The joint candidate of ``members`` (None when two of them set the same plant key
+    or are the same effect).
+
+    ``starts`` (candidate keys -> values, e.g. the single fits) become the start values;
+    the joint signature scan is ``scan``'s grid with the others at their start values
+    (one member is scanned while the others keep what they explained alone), plus the
+    point where every member is at its start value."""
+    keys: set[str] = set()
+    effects: set[str] = set()
+    for m in members:
+        mk = {f.key for f in m.free} | set(m.fixed)
+        if mk & keys or (m.effect != "parameter_error" and m.effect in effects):
+            return None
+        keys |= mk
+        effects.add(m.effect)
+    fixed: dict[str, Any] = {}
+    for m in members:
+        fixed.update(m.fixed)
+    starts = starts or {}
+    free = tuple(replace(f, start=min(max(float(starts[f.key]), f.low), f.high))
+                 if f.key in starts else f for m in members for f in m.free)
+    grid: dict[str, list[float]] = {}
+    if scan is not None and scan.grid:
+        grid = {k: list(v) for k, v in scan.grid.items()}
+    return Combined(name="+".join(m.name for m in members),
+                    effect="+".join(m.effect for m in members), free=free, fixed=fixed,
+                    grid=grid,
+                    needs_pressures=any(m.needs_pressures for m in members),
+                    describe=" and ".join(m.name for m in members), members=tuple(members))
+
+
+@dataclass
+class SetScore:
+    """One set of candidates (names, sorted) with its joint refit and BIC."""
+
+    names: tuple[str, ...]
+    result: FitResult | None
+    cost: float
+    k: int
+    bic: float
+    seg_cost: float | None = None
+    own: dict[str, float] = field(default_factory=dict)
+    own_of_rest: dict[str, float] = field(default_factory=dict)
+    earns: bool = True
+    full: bool = False
+
+
+def _bic(cost: float, k: int, n: float) -> float:
+    return n * math.log(max(cost, 1e-300)) + k * math.log(n)
+
+
+def search(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked],
+           max_nfev: int, nothing: Chosen, out_of_time: Callable[[], bool] = lambda: False
+           ) -> tuple[Chosen, dict[str, Any]]:
+    """The best set of explanations (see the module docstring); no triples once
+    ``out_of_time()``.
+
+    Returns
+    -------
+    chosen : the members as findings, in order of their own share; each finding's
+        values are those of the joint fit, its ``err`` the error left by it and the
+        members before it (for the share the report draws), its ``gain`` the share of
+        what the members before it leave that it removes.
+    info : for ``details.json``: every set's cost and BIC, the members' own shares, the
+        trade-offs, and the number of candidate models evaluated.
+    """
+    by = {c.name: c for c in cands}
+    n = refits.shpe.n_eff
+    single = {r.name: r for r in ranking if np.isfinite(r.dbic) and r.result.error is None}
+    pool = [r for r in ranking if r.name in single and r.dbic > 0][:POOL]
+    scores: dict[tuple[str, ...], SetScore] = {(): SetScore((), None, nothing.cost, 0,
+                                                            _bic(nothing.cost, 0, n),
+                                                            nothing.seg_cost)}
+    for r in single.values():
+        scores[(r.name,)] = SetScore((r.name,), r.result, r.result.cost, r.result.k,
+                                     _bic(r.result.cost, r.result.k, n), r.result.seg_cost)
+    evaluated = len(single)
+    # pairs: the best single with every other candidate (a weak second effect may rank
+    # low alone, behind the first one's proxies), and every pair of the pool
+    anchor = pool[0].name if pool else None
+    pairs = {tuple(sorted(p)) for p in itertools.combinations([r.name for r in pool], 2)}
+    pairs |= {tuple(sorted((anchor, o))) for o in single if anchor and o != anchor}
+    pairs = {p for p in pairs if combine([by[a] for a in p]) is not None}
+    evaluated += _fit_sets(refits, by, sorted(pairs), single, scores, SCREEN_NFEV, n)
+    _refine(refits, by, scores, 2, FULL_SETS, max_nfev, n)
+    best_pairs = sorted((s for k, s in scores.items() if len(k) == 2), key=lambda s: s.bic)
+    triples: set[tuple[str, ...]] = set()
+    if best_pairs and best_pairs[0].bic < min(scores[(a,)].bic for a in best_pairs[0].names) \
+            and not out_of_time():
+        bp = best_pairs[0].names
+        thirds = {r.name for r in pool} | {m for s in best_pairs[1:4] for m in s.names}
+        triples = {tuple(sorted(bp + (o,))) for o in thirds - set(bp)
+                   if combine([by[a] for a in bp + (o,)]) is not None}
+    # the pairs inside each triple (leaving out one member must be scored too)
+    inner = {q for t in triples for q in itertools.combinations(t, 2)} - set(scores)
+    evaluated += _fit_sets(refits, by, sorted(inner) + sorted(triples), single, scores,
+                           SCREEN_NFEV, n)
+    _refine(refits, by, scores, 3, 1, max_nfev, n)
+    triple = min((v for k, v in scores.items() if len(k) == 3), key=lambda v: v.bic, default=None)
+    if triple is not None:      # its members are judged against its pairs: as well fitted
+        _refine(refits, by, scores, 2, 3, max_nfev, n,
+                only=set(itertools.combinations(triple.names, 2)))
+    best = _select(scores, nothing.cost)
+    chosen = _as_chosen(best, scores, by, nothing, refits) if best else \
+        Chosen.nothing(nothing.cost, nothing.seg_cost, nothing.err)
+    info = {"sets": [{"set": list(s.names), "cost": s.cost, "k": s.k, "bic": s.bic,
+                      "own_share": s.own, "own_share_of_rest": s.own_of_rest,
+                      "every_member_earns_its_place": s.earns}
+                     for s in sorted(scores.values(), key=lambda s: s.bic)],
+            "chosen": list(best.names) if best else [],
+            "trade_offs": trade_offs(best, by) if best and best.result is not None else [],
+            "alternatives": [list(s.names) for s in scores.values()
+                             if best and s is not best and s.names and s.earns
+                             and s.bic - best.bic < DBIC_MIN],
+            "candidate_models": evaluated}
+    return chosen, info
+
+
+def _fit_sets(refits: Refits, by: Mapping[str, Candidate], sets: Sequence[tuple[str, ...]],
+              single: Mapping[str, Ranked], scores: dict, max_nfev: int, n: float) -> int:
+    """Refit each set jointly from its members' single values; record its score."""
+    todo = [tuple(sorted(s)) for s in sets if tuple(sorted(s)) not in scores]
+    if not todo:
+        return 0
+    combos = []
+    for s in todo:
+        start = {k: v for a in s for k, v in single[a].result.values.items()}
+        weakest = min(s, key=lambda a: single[a].dbic)
+        combos.append(combine([by[a] for a in s], start, scan=by[weakest]))
+    for s, res in zip(todo, refits(combos, max_nfev)):
+        if res.error is None and np.isfinite(res.cost):
+            scores[s] = SetScore(s, res, res.cost, res.k, _bic(res.cost, res.k, n), res.seg_cost)
+    return len(todo)
+
+
+def _earns(without: SetScore, with_: SetScore) -> bool:
+    """Whether a member earns its place: with it the BIC falls by :data:`DBIC_MIN`,
+    it removes :data:`GAIN_MIN` of what the others leave (the rule a single must meet
+    against the nominal model) and at least :data:`MIN_REMOVED` (an error below the
+    sensor noise is not worth a model)."""
+    removed = without.cost - with_.cost
+    return (without.bic - with_.bic >= DBIC_MIN and removed >= MIN_REMOVED
+            and removed >= GAIN_MIN * without.cost)
+
+
+def _refine(refits: Refits, by: Mapping[str, Candidate], scores: dict, size: int,
+            count: int, max_nfev: int, n: float, only: set | None = None) -> None:
+    """The ``count`` best screened sets of ``size`` (among ``only``) refitted fully from
+    their screening values; a full refit replaces the screening one when it costs no
+    more. Sets already refitted fully are left as they are."""
+    best = sorted((s for k, s in scores.items() if len(k) == size and s.result is not None
+                   and not s.full and (only is None or k in only)),
+                  key=lambda s: s.bic)[:count]
+    if not best:
+        return
+    combos = [combine([by[a] for a in s.names]) for s in best]
+    again = refits(combos, max_nfev, starts={c.name: s.result.values for c, s in zip(combos, best)})
+    for s, res in zip(best, again):
+        s.full = True
+        if res.error is None and np.isfinite(res.cost) and res.cost <= s.cost:
+            res.nfev += s.result.nfev
+            scores[s.names] = SetScore(s.names, res, res.cost, res.k, _bic(res.cost, res.k, n),
+                                       res.seg_cost, full=True)
+
+
+def _select(scores: Mapping[tuple[str, ...], SetScore], cost0: float) -> SetScore | None:
+    """The lowest-BIC set in which every member earns its place, significant against the
+    nominal model (dBIC, share removed, closed loop not worse); None: nothing."""
+    empty = scores[()]
+    for s in scores.values():
+        if not s.names:
+            continue
+        for m in s.names:
+            rest = tuple(x for x in s.names if x != m)
+            sub = scores.get(rest)
+            s.own[m] = (sub.cost - s.cost) / cost0 if sub is not None and cost0 > 0 else \
+                float("nan")
+            s.own_of_rest[m] = (sub.cost - s.cost) / sub.cost if sub is not None \
+                and sub.cost > 0 else float("nan")
+            if sub is None or not _earns(sub, s):
+                s.earns = False
+    ok = [s for s in scores.values() if s.names and s.earns
+          and empty.bic - s.bic >= DBIC_MIN and (cost0 - s.cost) / cost0 >= GAIN_MIN
+          and not (s.seg_cost is not None and empty.seg_cost
+                   and (empty.seg_cost - s.seg_cost) / empty.seg_cost < SEG_WORSE)]
+    return min(ok, key=lambda s: s.bic) if ok else None
+
+
+def _as_chosen(best: SetScore, scores: Mapping[tuple[str, ...], SetScore],
+               by: Mapping[str, Candidate], nothing: Chosen, refits: Refits) -> Chosen:
+    """The chosen set as findings: members by decreasing own share; values from the
+    joint fit; each one's ``err``/``cost`` those of the nested subset ending with it."""
+    order = sorted(best.names, key=lambda m: -np.nan_to_num(best.own.get(m, 0.0)))
+    joint = best.result
+    if len(order) > 1:
+        vals = by_member(joint, [by[m] for m in sorted(best.names)])
+    else:
+        vals = {order[0]: joint.values}
+    chosen = Chosen.nothing(nothing.cost, nothing.seg_cost, nothing.err)
+    for i, m in enumerate(order):
+        sub = scores[tuple(sorted(order[:i + 1]))]
+        res = replace(sub.result, name=m, effect=by[m].effect, k=by[m].k, values=vals[m],
+                      plant_values=by[m].plant_values(vals[m]),
+                      std={k: v for k, v in joint.std.items() if k in vals[m]},
+                      ci95={k: v for k, v in joint.ci95.items() if k in vals[m]})
+        gain = (chosen.cost - res.cost) / chosen.cost if chosen.cost > 0 else 0.0
+        prev = scores[tuple(sorted(order[:i]))]
+        r = Ranked(res, gain, gain / max(res.k, 1), prev.bic - sub.bic,
+                   None if res.seg_cost is None or not nothing.seg_cost else
+                   (nothing.seg_cost - res.seg_cost) / nothing.seg_cost, None, True,
+                   reason=f"own share {100 * best.own.get(m, float('nan')):.0f} % of the "
+                          f"nominal mismatch in the set {' + '.join(best.names)}")
+        chosen.add(r)
+    return chosen
+
+
+def by_member(joint: FitResult, members: Sequence[Candidate]) -> dict[str, dict[str, float]]:
+    """The joint fit's values split by member name."""
+    return {m.name: {f.key: joint.values[f.key] for f in m.free} for m in members}
+
+
+def trade_offs(best: SetScore, by: Mapping[str, Candidate]) -> list[dict[str, Any]]:
+    """Pairs of values of different members whose joint-fit correlation exceeds
+    :data:`TRADE_OFF`, with the regimes where each member's signature shows (data rich
+    in those regimes tells them apart)."""
+    corr = best.result.corr if best.result is not None else {}
+    owner = {f.key: m for m in best.names for f in by[m].free}
+    out = []
+    for (a, b), c in corr.items():
+        if owner.get(a) == owner.get(b) or abs(c) < TRADE_OFF:
+            continue
+        ra = EXPECTED.get(owner[a], EXPECTED.get(by[owner[a]].effect, ()))
+        rb = EXPECTED.get(owner[b], EXPECTED.get(by[owner[b]].effect, ()))
+        out.append({"values": [a, b], "correlation": round(float(c), 2),
+                    "tells_apart": f"{a} shows {' / '.join(ra) or 'throughout'}, {b} "
+                                   f"{' / '.join(rb) or 'throughout'}: a recording with more "
+                                   "of those regimes separates them"})
+    return out
