@@ -378,8 +378,9 @@ def _lines_section(steps: dict) -> rp.Section:
     ])
 
 
-def _metric(v, item: str) -> str:
-    return next((val for it, val, *_ in v.table() if it == item), "-")
+def _metric(v, item: str) -> float:
+    """A validation check's value in the units of its report table (%, s, mm)."""
+    return float(next((val for it, val, *_ in v.table() if it == item), "nan"))
 
 
 def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
@@ -388,7 +389,7 @@ def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
                                                                      vals[10.0].table()):
         rows.append([item, lim, unit, val1, ok1 == "pass", val10, ok10 == "pass"])
     items = ("overshoot", "settling time", "steady-state error")
-    crow = [[name] + [_metric(v, it) for it in items]
+    crow = [[name] + [f"{_metric(v, it):.2f}" for it in items]
             + [v.passed, ", ".join(c.name for c in v.failed) or "-"] for name, v in compare.items()]
     off = compare["PD, valve null offset"]
     return rp.Section("PID designed by the workbench, validated on both lines", [
@@ -399,7 +400,7 @@ def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
             f"modes). Exact sampled-data P limit {info['limit']:.1f} 1/s; K0 = limit / "
             f"{GAIN_MARGIN:g} = {info['k0']:.2f} 1/s; derivative zero at w0; Ti = the "
             f"specification's settling time / {TI_SETTLING:g} = {info['ti']:.3f} s (an "
-            "offset decays to e^-4 = 1.8 % within it). Gains after {len(tries)} "
+            f"offset decays to e^-4 = 1.8 % within it). Gains after {len(tries)} "
             f"validation round(s): kp = {pid.kp:.3f} V/m, kd = {pid.kd:.4f} V s/m, ki = "
             f"{pid.ki:.3f} V/(m s). The integral is frozen while the command saturates and "
             f"while |e| > {pid.integral_band * 1e3:g} mm (integral separation): the drive "
@@ -409,18 +410,18 @@ def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
             "that area is small (table below: without the band the same gains fail)."),
         rp.Table(["item", "limit", "unit", "1 m", "1 m verdict", "10 m", "10 m verdict"], rows,
                  caption="Validation of the PID on the paper's setpoint steps"),
-        rp.Paragraph(
-            "What the integral is for: a valve whose zero-flow command is not the "
-            f"controller's centre (here {NULL_OFFSET:g} V above it, ASSUMED) makes a PD loop rest "
-            f"where kp e = offset, {NULL_OFFSET / pid.kp * 1e3:.1f} mm short (measured: "
-            f"{_metric(off, 'steady-state error')} mm mean at the hold ends); the PID removes it."),
-        rp.Table(["controller (10 m lines)", "overshoot", "settling time", "steady-state error",
-                  "passed", "failed items"], crow, units=["", "%", "s", "mm", "", ""],
-                 caption="PID against PD and against the PID without its band, 10 m drive"),
         rp.Figure(plots.compare_figure([vals[1.0], vals[10.0]], ["1 m lines", "10 m lines"],
                                        title="PID on 1 m and 10 m lines"),
                   "Position, command and chamber pressures with 1 m and 10 m lines (the "
                   "workbench's Figs. 5, 6, 7)"),
+        rp.Paragraph(
+            "What the integral is for: a valve whose zero-flow command is not the "
+            f"controller's centre (here {NULL_OFFSET:g} V above it, ASSUMED) makes a PD loop rest "
+            f"where kp e = offset, {NULL_OFFSET / pid.kp * 1e3:.1f} mm short (measured: "
+            f"{_metric(off, 'steady-state error'):.2f} mm mean at the hold ends); the PID removes it."),
+        rp.Table(["controller (10 m lines)", "overshoot", "settling time", "steady-state error",
+                  "passed", "failed items"], crow, units=["", "%", "s", "mm", "", ""],
+                 caption="PID against PD and against the PID without its band, 10 m drive"),
     ])
 
 
