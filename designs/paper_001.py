@@ -350,8 +350,16 @@ def _config_section(pls: dict) -> rp.Section:
              "workbench (about 0.25 m each; 0.5 m on the 10 m line in quick mode)"]]
     return rp.Section("The paper's configuration and what is assumed", [
         rp.Paragraph("Paper 001 gives the model's form, the two line lengths and the valve's "
-                     "Cv, but no sizes of the drive. The plant file "
-                     "designs/plants/papers/iliev_lines_1m.toml marks every assumed value."),
+                     "Cv, but no sizes of the drive. Every number its text prints: Cv = 0.274 "
+                     "and X_T = 1 (eq. 2, with the constant 8.6e-8), the line lengths 1 m and "
+                     "10 m (Sec. 'Experimental study') and the 0.4 s (after Fig. 9); eqs. (1) to "
+                     "(6) carry symbols only and the figures' values are not in the text. None "
+                     "fixes the cylinder, load, supply, tube bore, setpoint steps, sample time "
+                     "or gains. The Cv is not used: eq. (2) as printed, with (1 - X/X_T) and "
+                     "X_T = 1, gives zero flow at the largest pressure drop (X = 1) instead of "
+                     "choked flow, so it has no consistent reading as an ISO 6358 conductance. "
+                     "The plant file designs/plants/papers/iliev_lines_1m.toml marks every "
+                     "assumed value."),
         rp.Table(["item", "value", "source"], rows, caption="Configuration"),
     ])
 
