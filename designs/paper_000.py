@@ -175,8 +175,8 @@ def step_velocity(plant: Plant, volts: float = 1.0, x0=X_STEP,
 
 def creep_study(rig: Plant, start: Plant, setup: dict) -> list[dict]:
     """Why the rig's velocity after the 1 V step creeps up: the step rerun with one
-    thing changed at a time (start position, dead volumes, the chambers' rest pressure
-    before the step), each with
+    thing changed at a time (start position, dead volumes, viscous friction, the
+    chambers' rest pressure before the step), each with
 
     * v at 0.05, 0.15, 0.30 s and the creep v(0.30) - v(0.15), m/s;
     * tau, s: time constant of the creep from three equally spaced samples
@@ -192,6 +192,8 @@ def creep_study(rig: Plant, start: Plant, setup: dict) -> list[dict]:
     cases = [("calibrated rig (rest at the valve's centre balance)", {}, X_STEP, p0_bal, True),
              ("start at x = 250 mm", {}, 0.25, p0_bal, False),
              ("dead volumes x 10 (20 cm^3)", dead, X_STEP, p0_bal, False),
+             ("viscous friction halved (k_f = 32.5 N s/m)", {"load.viscous_friction": 32.5},
+              X_STEP, p0_bal, False),
              ("rest pressure 3.5 bar abs in both chambers", {}, X_STEP, 3.5e5, True),
              ("rest pressure 2.5 bar abs in both chambers", {}, X_STEP, 2.5e5, True)]
     rows = []

@@ -285,7 +285,7 @@ def _disagreement_section(results, sweeps, meas, ex) -> rp.Section:
 
 
 def _creep_text(rows: list[dict]) -> str:
-    base, far, dead, p35, p25 = rows
+    base, far, dead, kf, p35, p25 = rows
     return (
         "Why it creeps, measured (table below). Table II's viscous friction k_f = 65 N s/m "
         "needs a pressure difference k_f v / A = 2.6 bar across the 15 mm piston at 0.7 m/s, "
@@ -295,7 +295,9 @@ def _creep_text(rows: list[dict]) -> str:
         f"the curve: {base['tau']:.2f} s) and {far['tau_b']:.2f} s from x = 250 mm (measured "
         f"{far['tau']:.2f} s), against the 47 ms of the paper's model. It is set by the "
         "exhaust chamber's volume and the velocity, not by the valve size; larger dead "
-        f"volumes only lengthen it (measured tau {dead['tau']:.2f} against {base['tau']:.2f} s). "
+        f"volumes only lengthen it (measured tau {dead['tau']:.2f} against {base['tau']:.2f} s), "
+        f"and halving Table II's k_f leaves it (creep {kf['creep']:.3f} against "
+        f"{base['creep']:.3f} m/s). "
         "The velocity is level only if the exhaust chamber starts near its running "
         f"pressure: with both chambers at 2.5 bar abs before the step the creep is "
         f"{p25['creep']:.3f} m/s, but the rig then rises faster than Fig. 6 shows, and the "
