@@ -37,6 +37,7 @@ import numpy as np
 from workbench import Plant, controllers, linearize, plots, references, simulate, stability
 from workbench import report as rp
 from workbench import validate
+from workbench.controllers.pd import pid_law
 from workbench.errors import InputError
 from workbench.output import check_output_dir
 from workbench.params import atomic_write_text, json_safe
@@ -130,19 +131,38 @@ def line_step(plant: Plant) -> dict:
 
 
 @dataclass(frozen=True)
-class BandedPID(controllers.PID):
-    """The workbench PID (:func:`workbench.controllers.pd.pid_law`, conditional
+class BandedPID:
+    """The workbench PID law (:func:`workbench.controllers.pd.pid_law`: conditional
     integration while saturated) whose integral also holds while |e| > integral_band
     (m): integral separation. A drive that integrates and carries no constant load
     rests at the valve's null, so its integral must end each step where it began:
     the error area the integral collects on the way must be paid back as overshoot.
-    Collecting only inside the band keeps that area, and the overshoot, small."""
+    Collecting only inside the band keeps that area, and the overshoot, small.
 
+    Not a subclass of :class:`workbench.controllers.PID` on purpose: code that reads a
+    PID's gains to run its own copy of the law (compiled loops, diagnosis) must refuse
+    this controller rather than run it without its band. Units as in PID.
+    """
+
+    kp: float
+    sample_time: float
+    kd: float = 0.0
+    ki: float = 0.0
+    u_center: float = 0.0
+    u_min: float = float("-inf")
+    u_max: float = float("inf")
     integral_band: float = float("inf")
 
+    kind = "pid"
+
+    def reset(self):
+        return (None, 0.0)
+
     def update(self, state, r: float, y: dict) -> tuple[tuple, float]:
-        held = state[1]
-        (e, integ), u = super().update(state, r, y)
+        e_prev, held = state
+        e = r - y["x"]
+        u, integ = pid_law(e, e if e_prev is None else e_prev, held, self.kp, self.kd,
+                           self.ki, self.sample_time, self.u_center, self.u_min, self.u_max)
         if abs(e) > self.integral_band:
             u, integ = u - self.ki * (integ - held), held
         return (e, integ), u
