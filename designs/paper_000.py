@@ -24,6 +24,13 @@ cause; ``DIR/summary.json`` holds the rows in ``paper_results``; the calibrated 
 is written to ``DIR/situm_rodless.calibrated.toml`` (a full run's copy, with comments:
 ``designs/plants/papers/situm_rodless_calibrated.toml``).
 
+The 1 V step's velocity keeps creeping up on the rig model; :func:`creep_study`
+measures why (the exhaust chamber settles with about V_b / (kappa A v), 0.4 s, not
+with the 47 ms of the paper's model) and the report shows it. The script is split in
+three: this file (calibration, experiments, main), paper_000_model.py (the paper's
+values, the derived quantities, the result rows) and paper_000_report.py (figures
+and report sections).
+
 Usage: python designs/paper_000.py [--quick] [--out DIR]
 """
 
