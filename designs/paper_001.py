@@ -37,6 +37,7 @@ import numpy as np
 from workbench import Plant, controllers, linearize, plots, references, simulate, stability
 from workbench import report as rp
 from workbench import validate
+from workbench.controllers.pd import pid_law
 from workbench.errors import InputError
 from workbench.output import check_output_dir
 from workbench.params import atomic_write_text, json_safe
@@ -130,19 +131,38 @@ def line_step(plant: Plant) -> dict:
 
 
 @dataclass(frozen=True)
-class BandedPID(controllers.PID):
-    """The workbench PID (:func:`workbench.controllers.pd.pid_law`, conditional
+class BandedPID:
+    """The workbench PID law (:func:`workbench.controllers.pd.pid_law`: conditional
     integration while saturated) whose integral also holds while |e| > integral_band
     (m): integral separation. A drive that integrates and carries no constant load
     rests at the valve's null, so its integral must end each step where it began:
     the error area the integral collects on the way must be paid back as overshoot.
-    Collecting only inside the band keeps that area, and the overshoot, small."""
+    Collecting only inside the band keeps that area, and the overshoot, small.
 
+    Not a subclass of :class:`workbench.controllers.PID` on purpose: code that reads a
+    PID's gains to run its own copy of the law (compiled loops, diagnosis) must refuse
+    this controller rather than run it without its band. Units as in PID.
+    """
+
+    kp: float
+    sample_time: float
+    kd: float = 0.0
+    ki: float = 0.0
+    u_center: float = 0.0
+    u_min: float = float("-inf")
+    u_max: float = float("inf")
     integral_band: float = float("inf")
 
+    kind = "pid"
+
+    def reset(self):
+        return (None, 0.0)
+
     def update(self, state, r: float, y: dict) -> tuple[tuple, float]:
-        held = state[1]
-        (e, integ), u = super().update(state, r, y)
+        e_prev, held = state
+        e = r - y["x"]
+        u, integ = pid_law(e, e if e_prev is None else e_prev, held, self.kp, self.kd,
+                           self.ki, self.sample_time, self.u_center, self.u_min, self.u_max)
         if abs(e) > self.integral_band:
             u, integ = u - self.ki * (integ - held), held
         return (e, integ), u
@@ -350,8 +370,16 @@ def _config_section(pls: dict) -> rp.Section:
              "workbench (about 0.25 m each; 0.5 m on the 10 m line in quick mode)"]]
     return rp.Section("The paper's configuration and what is assumed", [
         rp.Paragraph("Paper 001 gives the model's form, the two line lengths and the valve's "
-                     "Cv, but no sizes of the drive. The plant file "
-                     "designs/plants/papers/iliev_lines_1m.toml marks every assumed value."),
+                     "Cv, but no sizes of the drive. Every number its text prints: Cv = 0.274 "
+                     "and X_T = 1 (eq. 2, with the constant 8.6e-8), the line lengths 1 m and "
+                     "10 m (Sec. 'Experimental study') and the 0.4 s (after Fig. 9); eqs. (1) to "
+                     "(6) carry symbols only and the figures' values are not in the text. None "
+                     "fixes the cylinder, load, supply, tube bore, setpoint steps, sample time "
+                     "or gains. The Cv is not used: eq. (2) as printed, with (1 - X/X_T) and "
+                     "X_T = 1, gives zero flow at the largest pressure drop (X = 1) instead of "
+                     "choked flow, so it has no consistent reading as an ISO 6358 conductance. "
+                     "The plant file designs/plants/papers/iliev_lines_1m.toml marks every "
+                     "assumed value."),
         rp.Table(["item", "value", "source"], rows, caption="Configuration"),
     ])
 
@@ -378,8 +406,9 @@ def _lines_section(steps: dict) -> rp.Section:
     ])
 
 
-def _metric(v, item: str) -> str:
-    return next((val for it, val, *_ in v.table() if it == item), "-")
+def _metric(v, item: str) -> float:
+    """A validation check's value in the units of its report table (%, s, mm)."""
+    return float(next((val for it, val, *_ in v.table() if it == item), "nan"))
 
 
 def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
@@ -388,7 +417,7 @@ def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
                                                                      vals[10.0].table()):
         rows.append([item, lim, unit, val1, ok1 == "pass", val10, ok10 == "pass"])
     items = ("overshoot", "settling time", "steady-state error")
-    crow = [[name] + [_metric(v, it) for it in items]
+    crow = [[name] + [f"{_metric(v, it):.2f}" for it in items]
             + [v.passed, ", ".join(c.name for c in v.failed) or "-"] for name, v in compare.items()]
     off = compare["PD, valve null offset"]
     return rp.Section("PID designed by the workbench, validated on both lines", [
@@ -399,7 +428,7 @@ def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
             f"modes). Exact sampled-data P limit {info['limit']:.1f} 1/s; K0 = limit / "
             f"{GAIN_MARGIN:g} = {info['k0']:.2f} 1/s; derivative zero at w0; Ti = the "
             f"specification's settling time / {TI_SETTLING:g} = {info['ti']:.3f} s (an "
-            "offset decays to e^-4 = 1.8 % within it). Gains after {len(tries)} "
+            f"offset decays to e^-4 = 1.8 % within it). Gains after {len(tries)} "
             f"validation round(s): kp = {pid.kp:.3f} V/m, kd = {pid.kd:.4f} V s/m, ki = "
             f"{pid.ki:.3f} V/(m s). The integral is frozen while the command saturates and "
             f"while |e| > {pid.integral_band * 1e3:g} mm (integral separation): the drive "
@@ -409,18 +438,18 @@ def _pid_section(pid, info, vals, compare, tries) -> rp.Section:
             "that area is small (table below: without the band the same gains fail)."),
         rp.Table(["item", "limit", "unit", "1 m", "1 m verdict", "10 m", "10 m verdict"], rows,
                  caption="Validation of the PID on the paper's setpoint steps"),
-        rp.Paragraph(
-            "What the integral is for: a valve whose zero-flow command is not the "
-            f"controller's centre (here {NULL_OFFSET:g} V above it, ASSUMED) makes a PD loop rest "
-            f"where kp e = offset, {NULL_OFFSET / pid.kp * 1e3:.1f} mm short (measured: "
-            f"{_metric(off, 'steady-state error')} mm mean at the hold ends); the PID removes it."),
-        rp.Table(["controller (10 m lines)", "overshoot", "settling time", "steady-state error",
-                  "passed", "failed items"], crow, units=["", "%", "s", "mm", "", ""],
-                 caption="PID against PD and against the PID without its band, 10 m drive"),
         rp.Figure(plots.compare_figure([vals[1.0], vals[10.0]], ["1 m lines", "10 m lines"],
                                        title="PID on 1 m and 10 m lines"),
                   "Position, command and chamber pressures with 1 m and 10 m lines (the "
                   "workbench's Figs. 5, 6, 7)"),
+        rp.Paragraph(
+            "What the integral is for: a valve whose zero-flow command is not the "
+            f"controller's centre (here {NULL_OFFSET:g} V above it, ASSUMED) makes a PD loop rest "
+            f"where kp e = offset, {NULL_OFFSET / pid.kp * 1e3:.1f} mm short (measured: "
+            f"{_metric(off, 'steady-state error'):.2f} mm mean at the hold ends); the PID removes it."),
+        rp.Table(["controller (10 m lines)", "overshoot", "settling time", "steady-state error",
+                  "passed", "failed items"], crow, units=["", "%", "s", "mm", "", ""],
+                 caption="PID against PD and against the PID without its band, 10 m drive"),
     ])
 
 
