@@ -6,6 +6,11 @@ The rig: designs/plants/rigs/precision_rig25.toml (dry friction 15/25 N, 2 % spo
 plant file (NMPC, the best of the three in designs/precision_positioning.py). A short
 profile with what the must-shows judge: 60 mm steps both ways, one period of the
 60 mm 0.5 Hz sine, and a 4 s hold at the end.
+
+The sensor noise is seed 0 (evaluate_design's default). The must-shows are NOT met
+for every noise realisation: with seed 1 the worst sine error was 2.4 mm, with seed 2
+the worst steady state 0.36 mm (3 quanta) -- measured 2026-11-24, issue 14 stays open
+on robustness; these tests pin what seed 0 achieves so a regression shows.
 """
 
 from __future__ import annotations
