@@ -94,7 +94,7 @@ class PlainRTI(_Shifted):
         self.lin = compiled(lin)            # MX: the interval map's derivatives mapped, not unrolled
         H = ca.Function("h", [w, p], [ca.hessian(f, w)[0]])(np.zeros(nw), np.zeros(p.shape[0]))
         self.H = H + regularisation * ca.DM.eye(nw)       # constant; strictly convex
-        self.kind, self.failures, self.nw = qp, 0, nw
+        self.kind, self.failures, self.inaccurate, self.nw = qp, 0, 0, nw
         sa = self.lin.sparsity_out(2)
         if qp == "osqp":
             import osqp
@@ -130,7 +130,10 @@ class PlainRTI(_Shifted):
         self.qp.update(q=grad, Ax=Ax, l=np.concatenate([lba, self.lbw - w]),
                        u=np.concatenate([uba, self.ubw - w]))
         res = self.qp.solve()
-        return res.x if res.info.status_val in (1, 2) else None     # solved (inaccurate)
+        if res.info.status_val != 1:
+            self.inaccurate += 1
+        # solved, solved inaccurate, or the iteration limit: the last iterate is the step
+        return res.x if res.info.status_val in (1, 2, 7) else None
 
     def update(self, state, r: float, y: dict):
         w_prev, r_prev = (None, None) if state is None else state
