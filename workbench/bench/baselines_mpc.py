@@ -132,22 +132,24 @@ class PlainRTI(_Shifted):
         res = self.qp.solve()
         if res.info.status_val != 1:
             self.inaccurate += 1
-        # solved, solved inaccurate, or the iteration limit: the last iterate is the step
-        return res.x if res.info.status_val in (1, 2, 7) else None
+        return res.x if res.info.status_val in (1, 2) else None    # solved (inaccurate)
 
     def update(self, state, r: float, y: dict):
         w_prev, r_prev = (None, None) if state is None else state
         p, z = self.params(r, r_prev, y)
         w = self.guess(w_prev, z)
-        for _ in range(10 if state is None else 1):        # converge at the first sample
+        ok = True
+        for _ in range(10 if w_prev is None else 1):       # converge at a (re)start
             grad, g, G = self.lin(w, p)
             dw = self._solve(np.asarray(grad).ravel(), np.asarray(g).ravel(), G, w)
             if dw is None or not np.all(np.isfinite(dw)):
                 self.failures += 1
+                ok = False
                 break
             w = w + dw
-        self.u_prev = float(w[self.nxs])
-        return (w, r), self.command(w)
+        self.u_prev = float(np.clip(w[self.nxs], self.pb.w_lo, self.pb.w_hi))
+        # a failed QP: apply the shifted plan, restart from rest at the next sample
+        return (w if ok else None, r), self.pb.u_c + self.pb.u_s * self.u_prev
 
 
 class _Ipopt(_Shifted):
