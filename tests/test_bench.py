@@ -75,6 +75,7 @@ def test_bench_sweep_schema_and_agreement():
     # equilibrium solve and the eigenvalues
     assert res["error"] < 1e-9
     assert res["baselines"]["python_control_loop"]["error"] < 1e-9
+    assert res["baselines"]["batched_numpy_casadi"]["error"] < 1e-9
 
 
 def test_bench_simulate_case_schema_and_accuracy():

@@ -103,8 +103,6 @@ def _scores(run: dict, nmpc, T: float) -> dict[str, Any]:
 _DESCRIPTIONS = {
     "plain_rti_osqp": "Gauss-Newton RTI on the same NLP, sparse QP by OSQP (eps 1e-4, "
                       "polished, warm started), Jacobians generated as C; one QP per sample",
-    "plain_rti_qpoases": "the same RTI with CasADi's qpOASES (sparse Schur complement) "
-                         "as the QP solver",
     "ipopt_gauss_newton": "IPOPT to convergence on the same NLP, Gauss-Newton Hessian "
                           "(hess_lag), expanded to SX, warm-started primal and dual",
     "do_mpc_recommended": "do-mpc 5 on the same problem (collocation), IPOPT with expand and "
@@ -112,7 +110,7 @@ _DESCRIPTIONS = {
     "do_mpc_defaults": "old baseline: do-mpc with IPOPT at its defaults",
 }
 #: which of ours each baseline is compared with: RTI with RTI, converged with converged
-_AGAINST = {"plain_rti_osqp": "rti", "plain_rti_qpoases": "rti", "ipopt_gauss_newton": "sqp", "do_mpc_recommended": "sqp",
+_AGAINST = {"plain_rti_osqp": "rti", "ipopt_gauss_newton": "sqp", "do_mpc_recommended": "sqp",
             "do_mpc_defaults": "sqp"}
 
 
@@ -125,7 +123,6 @@ def _baselines(nmpc_vm) -> tuple[dict, dict]:
         missing["plain_rti_osqp"] = why
     else:
         ctrls["plain_rti_osqp"] = bl.PlainRTI(nmpc_vm, qp="osqp")
-    ctrls["plain_rti_qpoases"] = bl.PlainRTI(nmpc_vm, qp="qpoases")
     ctrls["ipopt_gauss_newton"] = bl.ipopt_gauss_newton(nmpc_vm)
     try:
         from ..controllers.mpc import DoMPC

@@ -29,8 +29,10 @@ def bench(quick: bool = False) -> dict:
     the whole map: ``loop_model_built_once`` (:mod:`.baselines_sweep`: plant built once,
     equilibrium per point, numpy ZOH and eigenvalues) and the old
     ``python_control_loop`` (plant rebuilt per point, python-control c2d/feedback/poles).
-    ``error``: the largest |rho| difference between the map and the model-built-once loop
-    on the sample (-).
+    ``batched_numpy_casadi`` (:func:`.baselines_sweep.batched_rho`: the whole map at
+    once, model built once, mapped CasADi rootfinder and Jacobians, batched numpy) runs
+    on every point. ``error``: the largest |rho| difference between the map and the
+    model-built-once loop on the sample (-).
     """
     import control
 
@@ -38,7 +40,7 @@ def bench(quick: bool = False) -> dict:
     from ..linearize import operating_point, tangent
     from ..plant import Plant
     from ..stability.maps import Axis, stability_map
-    from .baselines_sweep import pointwise_rho
+    from .baselines_sweep import batched_rho, pointwise_rho
     plant = Plant.from_toml(ROOT / "designs" / "plants" / "situm_rodless.toml")
     n = 60 if quick else 200
     xa = Axis.linspace("position", 0.05, 0.45, n)
@@ -52,15 +54,23 @@ def bench(quick: bool = False) -> dict:
     iy, ix = np.divmod(sample, n)
     px, pp = xa.values[ix], ya.values[iy]
     scale = n * n / len(sample)
+    gx, gy = np.meshgrid(xa.values, ya.values)
     res, stats = interleaved({"ours": lambda: stability_map(plant, xa, ya, progress=False),
+                              "batched": lambda: batched_rho(plant, gx.ravel(), gy.ravel(),
+                                                             ctrl),
                               "loop": lambda: pointwise_rho(plant, px, pp, ctrl)},
                              repeats=2 if quick else 3, warmup=False)
     m = res["ours"]
     err = float(np.max(np.abs(res["loop"] - m.rho[iy, ix])))
+    err_b = float(np.max(np.abs(res["batched"] - m.rho.ravel())))
     loop_stats = {k: v * scale if isinstance(v, float) else v
                   for k, v in stats["loop"].items() if k != "spread"}
     med = stats["ours"]["median_s"]
-    rows = {"loop_model_built_once": baseline(
+    rows = {"batched_numpy_casadi": baseline(
+        stats["batched"], med, err_b, "all points at once, model built once: one mapped "
+        "CasADi Newton rootfinder for the equilibria, one mapped Jacobian call, batched "
+        "scipy expm (ZOH) and numpy eigenvalues (CasADi virtual machine, no C)"),
+            "loop_model_built_once": baseline(
         loop_stats, med, err, "python loop over the points, plant built once: workbench "
         "operating_point, one CasADi Jacobian function, scipy expm ZOH, numpy eigenvalues; "
         f"timed on {len(sample)} points and extrapolated")}
