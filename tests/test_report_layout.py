@@ -340,3 +340,14 @@ def test_blocks_taller_than_a_page_still_flow(tmp_path):
     assert all(f" r{i} " in flat for i in range(120))
     assert "Figure 1: after the table" in flat
     assert all(f >= 0.6 for f in page_fill(pdf_path)[:-1])
+
+
+def test_tables_split_without_widows_or_orphans(tmp_path):
+    # wherever the page ends, a split table leaves >= 2 rows on each page it is on
+    # (these lengths put the page end one row into, and one row before the end of,
+    # the list: measured with MIN_ROWS = 1, 31 -> [1, 11] and 58 -> [11, 1] rows)
+    for n in (*range(29, 33), *range(56, 61)):
+        blocks = [rp.Paragraph(LOREM * n), rp.KeyValues([(f"item {i}", i) for i in range(12)])]
+        _, pdf_path = rp.write(rp.Report("w", sections=[rp.Section("s", blocks)]), tmp_path / str(n))
+        counts = [len(re.findall(r"item \d+", p)) for p in _pdf_pages_text(pdf_path)]
+        assert sum(counts) == 12 and all(c == 0 or c >= 2 for c in counts), (n, counts)
