@@ -387,3 +387,16 @@ def test_text_goes_before_a_figure_that_fits_nowhere(tmp_path):
     first = re.sub(r"\s+", " ", pages[0])
     assert first.count("1.1 Huge figure") == 2                        # contents + heading
     assert first.rfind("1.1 Huge figure") < first.index("block 0.")
+
+
+def test_odd_sizes_render(tmp_path):
+    # a table of 3 rows each taller than a third of a page, a one-row table, a
+    # figure taller than the page with a heading and caption: all drawn, no error
+    tall = "\n".join(["line"] * 25)
+    blocks = [rp.Table(["a", "b"], [[tall, 1.0], [tall, 2.0], [tall, 3.0]], caption="tall rows"),
+              rp.Table(["only"], [[1.5]]), rp.Heading("tall figure"),
+              rp.Figure(_figure(14.0, "very tall"), "taller than the page")]
+    _, pdf_path = write(tmp_path, [rp.Section("s", blocks)])
+    flat = re.sub(r"\s+", " ", " ".join(_pdf_pages_text(pdf_path)))
+    assert "Table 1: tall rows" in flat and "Table 2" in flat
+    assert "Figure 1: taller than the page" in flat and flat.count("line") == 75

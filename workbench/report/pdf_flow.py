@@ -112,7 +112,7 @@ class KeepGroup(Flowable):
 
     def split(self, aw, ah):
         at_top = bool(getattr(getattr(self, "_frame", None), "_atTop", False))
-        if self.natural_height(aw) <= ah or (at_top and self.is_figure):
+        if self.natural_height(aw) <= ah:
             return self.content()
         if self.is_figure:
             if self.fits_somehow(aw, ah):
@@ -121,8 +121,11 @@ class KeepGroup(Flowable):
                             height=self.body.drawHeight * s)
                 img.hAlign = self.body.hAlign
                 return self.lead + [img] + self.tail
-            return [FrameBreak()] + self.content()
+            return ([] if at_top else [FrameBreak()]) + self.content()
         parts = self._split_rows(aw, ah)
+        if not parts and at_top:  # a page is not enough: split anywhere, as reportlab does
+            room = ah - self._height(self.lead, aw) - self.body.getSpaceBefore()
+            parts = list(self.body.split(aw, room)) if room > 0 else []
         if parts:
             return self.lead + parts + self.tail
         return ([] if at_top else [FrameBreak()]) + self.content()
