@@ -16,6 +16,11 @@ that leaves most of a page blank. :class:`KeepGroup` replaces that rule:
   next heading or figure) go first when they fit in the space left, and takes the
   top of the next page (:func:`float_figures`, called from the doc template).
 
+So a page is left more than :data:`MAX_EMPTY` empty before a figure only when
+the figure would have to shrink below :data:`MIN_SCALE` and no text after it
+fits into the space left (a figure of nearly a page after half a page of text
+at the end of a section).
+
 The group always asks to be split (as reportlab's ``KeepTogether``), so every
 heading inside it is handed to the doc template on its own and still reaches
 the table of contents and the PDF outline.
@@ -35,8 +40,9 @@ __all__ = ["KeepGroup", "float_figures", "MAX_EMPTY", "MIN_SCALE", "EASY_SCALE"]
 #: that moves to the next page.
 MAX_EMPTY = 0.4
 
-#: Smallest scale a figure is shrunk to so that it fits the rest of a page.
-MIN_SCALE = 0.5
+#: Smallest scale a figure is shrunk to so that it fits the rest of a page (at
+#: half size a full-width plot's labels and legends are no longer readable).
+MIN_SCALE = 0.6
 
 #: A figure that fits at this scale or more is always shrunk rather than moved.
 EASY_SCALE = 0.85
