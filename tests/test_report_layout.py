@@ -201,6 +201,24 @@ def test_empty_columns_are_not_shown(tmp_path):
     assert t.view().columns == ("a", "b")
 
 
+@pytest.mark.parametrize("header, unbroken, breaks", [
+    ("max |p_a - single-valve plan|", ["max |p_a - single-valve plan|"], []),
+    ("pass rate (95 % interval)", ["(95 % interval)"], ["pass rate"]),
+    ("largest |x - x_r| from 0.5 s after each step", ["|x - x_r|", "0.5 s"],
+     ["largest", "after each step"]),
+    ("|z|max (exact sampled loop, mid-stroke)", [], ["exact sampled loop"]),  # prose
+    ("T0 = 1/w0", ["T0 = 1/w0"], []),
+])
+def test_header_break_points(header, unbroken, breaks):
+    from workbench.report.columns import NBSP, keep_formulas
+    shown = keep_formulas(header)
+    assert shown.replace(NBSP, " ") == header              # only the kind of space changes
+    for part in unbroken:
+        assert part.replace(" ", NBSP) in shown, (part, shown)
+    for part in breaks:                                     # ordinary spaces left to wrap at
+        assert part in shown, (part, shown)
+
+
 def _pdf_lines(path: Path) -> list[str]:
     lines = []
     for page in PdfReader(path).pages:
@@ -323,7 +341,8 @@ def test_figure_shrinks_into_the_rest_of_a_page(tmp_path):
     left, _, right, _ = images[0].get_bounds()
     from workbench.report import pdf as rp_pdf
     scale = (right - left) / rp_pdf.FRAME_W
-    assert 0.5 <= scale < 0.999, scale        # MIN_SCALE <= scale < full width
+    from workbench.report.pdf_flow import MIN_SCALE
+    assert MIN_SCALE <= scale < 0.999, scale  # shrunk, but not below MIN_SCALE
     pdf.close()
 
 
@@ -340,3 +359,45 @@ def test_blocks_taller_than_a_page_still_flow(tmp_path):
     assert all(f" r{i} " in flat for i in range(120))
     assert "Figure 1: after the table" in flat
     assert all(f >= 0.6 for f in page_fill(pdf_path)[:-1])
+
+
+def test_tables_split_without_widows_or_orphans(tmp_path):
+    # wherever the page ends, a split table leaves >= 2 rows on each page it is on
+    # (these lengths put the page end one row into, and one row before the end of,
+    # the list: measured with MIN_ROWS = 1, 31 -> [1, 11] and 58 -> [11, 1] rows)
+    for n in (*range(29, 33), *range(56, 61)):
+        blocks = [rp.Paragraph(LOREM * n), rp.KeyValues([(f"item {i}", i) for i in range(12)])]
+        _, pdf_path = rp.write(rp.Report("w", sections=[rp.Section("s", blocks)]), tmp_path / str(n))
+        counts = [len(re.findall(r"item \d+", p)) for p in _pdf_pages_text(pdf_path)]
+        assert sum(counts) == 12 and all(c == 0 or c >= 2 for c in counts), (n, counts)
+
+
+def test_text_goes_before_a_figure_that_fits_nowhere(tmp_path):
+    # a figure of nearly a full page after half a page of text: it cannot shrink
+    # to half its size, so the blocks after it that fit fill the page first
+    # (without that, page 1 was 51 % full), then it takes the top of page 2
+    blocks = [rp.Paragraph(LOREM * 10), rp.Heading("Huge figure"),
+              rp.Figure(_figure(9.5, "huge"), "huge figure")]
+    blocks += [rp.Paragraph(f"after the huge figure, block {k}. " + LOREM) for k in range(4)]
+    _, pdf_path = write(tmp_path, [rp.Section("s", blocks)])
+    assert all(f >= 0.6 for f in page_fill(pdf_path)[:-1])
+    pages = _pdf_pages_text(pdf_path)
+    fig_page = next(i for i, p in enumerate(pages) if "Figure 1: huge figure" in p)
+    assert fig_page == 1 and "block 0." in pages[0]
+    # the figure's heading went with the text: above block 0 on page 1
+    first = re.sub(r"\s+", " ", pages[0])
+    assert first.count("1.1 Huge figure") == 2                        # contents + heading
+    assert first.rfind("1.1 Huge figure") < first.index("block 0.")
+
+
+def test_odd_sizes_render(tmp_path):
+    # a table of 3 rows each taller than a third of a page, a one-row table, a
+    # figure taller than the page with a heading and caption: all drawn, no error
+    tall = "\n".join(["line"] * 25)
+    blocks = [rp.Table(["a", "b"], [[tall, 1.0], [tall, 2.0], [tall, 3.0]], caption="tall rows"),
+              rp.Table(["only"], [[1.5]]), rp.Heading("tall figure"),
+              rp.Figure(_figure(14.0, "very tall"), "taller than the page")]
+    _, pdf_path = write(tmp_path, [rp.Section("s", blocks)])
+    flat = re.sub(r"\s+", " ", " ".join(_pdf_pages_text(pdf_path)))
+    assert "Table 1: tall rows" in flat and "Table 2" in flat
+    assert "Figure 1: taller than the page" in flat and flat.count("line") == 75

@@ -262,7 +262,7 @@ _OPERATORS = set("=<>+-*/^|~\u00b7\u00d7\u2264\u2265\u2248\u00b1\u2212")
 _STOPWORDS = {"of", "at", "to", "in", "on", "and", "or", "the", "per", "for", "vs", "a",
               "an", "is", "by", "as", "if", "no", "not", "with"}
 _NUM = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?%?$")
-_MAX_CHUNK = 28  # characters: a longer "formula" is prose, left breakable
+_MAX_CHUNK = 32  # characters: a longer "formula" keeps only its operator bonds
 
 
 def _is_operator(token: str) -> bool:
@@ -292,8 +292,9 @@ def keep_formulas(text: str) -> str:
     (``=``, ``-``, ``<=``, ``/`` ...), when it is inside brackets or ``|...|``
     (unless the text reads as prose: it holds a comma), or when it follows a
     number (``10 ms``). A formula found this way also takes in the short symbol
-    tokens around it (``K0 = kp Kv``, ``max |x - x_r|``). Chunks longer than 28
-    characters are left breakable. Line breaks in ``text`` are kept.
+    tokens around it (``K0 = kp Kv``, ``max |x - x_r|``). A chunk longer than 32
+    characters keeps only the bonds next to operators and numbers, and is broken
+    at its other spaces if still too long. Line breaks in ``text`` are kept.
 
     Examples
     --------
@@ -306,28 +307,37 @@ def keep_formulas(text: str) -> str:
     if len(tokens) < 2:
         return text
     inside = _depths(tokens)
-    bond = [False] * (len(tokens) - 1)
-    for i in range(len(bond)):
-        a, b = tokens[i], tokens[i + 1]
-        prose_group = inside[i] and "," in text  # brackets holding a list: prose
-        bond[i] = (_is_operator(a) or _is_operator(b) or (inside[i] and not prose_group)
-                   or bool(_NUM.match(a)) and bool(b))
-    formula = any(_is_operator(t) for t in tokens) or any(bond)
-    if formula:  # short symbols next to a formula belong to it: "K0 = kp Kv"
+    strong = [_is_operator(a) or _is_operator(b) or bool(_NUM.match(a)) and bool(b)
+              for a, b in zip(tokens, tokens[1:])]
+    prose = "," in text  # brackets holding a list read as prose
+    bond = [s or (inside[i] and not prose) for i, s in enumerate(strong)]
+    if any(bond):  # short symbols next to a formula belong to it: "K0 = kp Kv"
         short = [0 < len(t) <= 3 and t.lower() not in _STOPWORDS and not _NUM.match(t)
                  for t in tokens]
         for _ in range(2):
             for i in range(len(bond)):
                 left = bond[i - 1] if i > 0 else False
                 right = bond[i + 1] if i + 1 < len(bond) else False
-                if not bond[i] and ((short[i] and right) or (short[i + 1] and left)
-                                    or (short[i] and short[i + 1] and (left or right))):
+                if not bond[i] and ((short[i] and right) or (short[i + 1] and left)):
                     bond[i] = True
+    # a chunk too long to stay on one line keeps only its operator bonds
+    chunk_len = _chunk_lengths(tokens, bond)
+    bond = [b and (chunk_len[i] <= _MAX_CHUNK or strong[i]) for i, b in enumerate(bond)]
+    chunk_len = _chunk_lengths(tokens, bond)
+    bond = [b and chunk_len[i] <= _MAX_CHUNK for i, b in enumerate(bond)]
     out = [tokens[0]]
     for i, b in enumerate(bond):
-        out.append(NBSP if b else " ")
-        out.append(tokens[i + 1])
-    joined = "".join(out)
-    # leave over-long chunks breakable (prose in brackets, long formulas)
-    pieces = joined.split(" ")
-    return " ".join(p if len(p) <= _MAX_CHUNK else p.replace(NBSP, " ") for p in pieces)
+        out += [NBSP if b else " ", tokens[i + 1]]
+    return "".join(out)
+
+
+def _chunk_lengths(tokens: list[str], bond: list[bool]) -> list[int]:
+    """For each space between tokens: length of the chunk it would be part of."""
+    lengths, start = [0] * len(bond), 0
+    for i in range(len(tokens)):
+        if i == len(bond) or not bond[i]:
+            n = sum(len(t) for t in tokens[start:i + 1]) + (i - start)
+            for k in range(start, i):
+                lengths[k] = n
+            start = i + 1
+    return lengths

@@ -6,7 +6,8 @@ that leaves most of a page blank. :class:`KeepGroup` replaces that rule:
 
 * a **table** that does not fit is split by rows where the page ends (its
   heading, caption and header rows stay with the first rows; the header rows are
-  repeated on the next page);
+  repeated on the next page), never leaving fewer than :data:`MIN_ROWS` rows on
+  either side;
 * a **figure** that does not fit is scaled down to the space left when moving it
   would leave more than :data:`MAX_EMPTY` of the page empty (not below
   :data:`MIN_SCALE` of its size), and always when it needs to lose at most
@@ -14,6 +15,11 @@ that leaves most of a page blank. :class:`KeepGroup` replaces that rule:
 * a figure that still does not fit lets the text blocks that follow it (up to the
   next heading or figure) go first when they fit in the space left, and takes the
   top of the next page (:func:`float_figures`, called from the doc template).
+
+So a page is left more than :data:`MAX_EMPTY` empty before a figure only when
+the figure would have to shrink below :data:`MIN_SCALE` and no text after it
+fits into the space left (a figure of nearly a page after half a page of text
+at the end of a section).
 
 The group always asks to be split (as reportlab's ``KeepTogether``), so every
 heading inside it is handed to the doc template on its own and still reaches
@@ -34,11 +40,15 @@ __all__ = ["KeepGroup", "float_figures", "MAX_EMPTY", "MIN_SCALE", "EASY_SCALE"]
 #: that moves to the next page.
 MAX_EMPTY = 0.4
 
-#: Smallest scale a figure is shrunk to so that it fits the rest of a page.
-MIN_SCALE = 0.5
+#: Smallest scale a figure is shrunk to so that it fits the rest of a page (at
+#: half size a full-width plot's labels and legends are no longer readable).
+MIN_SCALE = 0.6
 
 #: A figure that fits at this scale or more is always shrunk rather than moved.
 EASY_SCALE = 0.85
+
+#: Fewest table rows left at the foot of a page or carried to the next one.
+MIN_ROWS = 2
 
 _FUZZ = 1.0  # pt of slack when fitting scaled figures (rounding in reportlab's frame)
 
@@ -108,7 +118,7 @@ class KeepGroup(Flowable):
 
     def split(self, aw, ah):
         at_top = bool(getattr(getattr(self, "_frame", None), "_atTop", False))
-        if self.natural_height(aw) <= ah or (at_top and self.is_figure):
+        if self.natural_height(aw) <= ah:
             return self.content()
         if self.is_figure:
             if self.fits_somehow(aw, ah):
@@ -117,17 +127,33 @@ class KeepGroup(Flowable):
                             height=self.body.drawHeight * s)
                 img.hAlign = self.body.hAlign
                 return self.lead + [img] + self.tail
-            return [FrameBreak()] + self.content()
+            return ([] if at_top else [FrameBreak()]) + self.content()
+        parts = self._split_rows(aw, ah)
+        if not parts and at_top:  # a page is not enough: split anywhere, as reportlab does
+            room = ah - self._height(self.lead, aw) - self.body.getSpaceBefore()
+            parts = list(self.body.split(aw, room)) if room > 0 else []
+        if parts:
+            return self.lead + parts + self.tail
+        return ([] if at_top else [FrameBreak()]) + self.content()
+
+    def _split_rows(self, aw: float, ah: float) -> list:
+        """The table split where the page ends, at least :data:`MIN_ROWS` rows each side."""
         room = ah - self._height(self.lead, aw) - self.body.getSpaceBefore()
-        for _ in range(4):  # spacing between lead and rows: shrink the room until it fits
+        head = getattr(self.body, "repeatRows", 0) or 0
+        head = head if isinstance(head, int) else len(head)
+        for _ in range(3 + MIN_ROWS):  # spacing and widows: shrink the room until right
             parts = self.body.split(aw, room) if room > 0 else []
             if len(parts) < 2:
-                break
+                return []
+            first = len(parts[0]._cellvalues) - head
+            last = sum(len(p._cellvalues) - head for p in parts[1:])
+            if first < MIN_ROWS:
+                return []
             excess = self._height(self.lead + [parts[0]], aw) - ah
-            if excess <= 0:
-                return self.lead + list(parts) + self.tail
-            room -= excess + _FUZZ
-        return ([] if at_top else [FrameBreak()]) + self.content()
+            if excess <= 0 and last >= MIN_ROWS:  # the rest starts the next page
+                return [parts[0], FrameBreak()] + list(parts[1:])
+            room -= max(excess, 0) + _FUZZ + (parts[0]._rowHeights[-1] if excess <= 0 else 0)
+        return []
 
 
 def _movable(f) -> bool:
