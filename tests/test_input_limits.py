@@ -155,3 +155,30 @@ def test_check_json_reports_the_plausibility_numbers(capsys):
     assert got["choked_flow_kg_s"] == pytest.approx(6.23e-9 * 5.0e5 * 1.185, rel=1e-12)
     # 10 s at 10 ms = 1000 samples x 8 bytes x (time + command + states + outputs)
     assert got["run_bytes_10s"] == pytest.approx(1000 * 8 * 13, rel=0.5)
+
+
+@pytest.fixture(scope="module")
+def beyond_stroke(tmp_path_factory):
+    """A recording whose x leaves the 0.5 m stroke of the situm rig (0.1 .. 0.9 m)."""
+    t = np.arange(1001) * 1e-3
+    path = tmp_path_factory.mktemp("stroke") / "rec.csv"
+    Recording.from_arrays(t, u=np.full(t.size, 5.0), x=np.linspace(0.1, 0.9, t.size),
+                          r=np.full(t.size, 0.3)).to_csv(path)
+    return path
+
+
+@pytest.mark.parametrize("command, extra", [(["simulate"], []),
+                                            (["diagnose"], ["--no-report"]),
+                                            (["identify", "greybox"], ["--params", "load.mass"])])
+def test_cli_commands_check_the_recording_against_the_plant(command, extra, beyond_stroke,
+                                                            tmp_path, capsys):
+    # The issue's diagnose case ("no finding ... fit of -2.7e134 %") is now refused on
+    # loading, before any computation, by every command that has the plant.
+    plant = ROOT / "designs/plants/situm_rodless.toml"
+    argv = command + [str(plant), str(beyond_stroke), "--out", str(tmp_path / "out"), *extra]
+    start = time.perf_counter()
+    assert main(argv) == 2
+    assert time.perf_counter() - start < 30.0            # refused on loading, no replay
+    err = capsys.readouterr().err
+    assert "column 'x'" in err and "outside the stroke [0, 0.5] m" in err
+    assert not (tmp_path / "out").exists()
