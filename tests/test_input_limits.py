@@ -182,3 +182,32 @@ def test_cli_commands_check_the_recording_against_the_plant(command, extra, beyo
     err = capsys.readouterr().err
     assert "column 'x'" in err and "outside the stroke [0, 0.5] m" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_rls_forgetting_with_less_memory_than_parameters_is_refused():
+    # --forgetting 1e-300 ran to NaN estimates (P / lambda overflows) and was written
+    y, u = _arx_data(300)
+    with pytest.raises(InputError, match=r"forgetting factor 1e-300 remembers about 1 "
+                                         r"samples, fewer than the 2 parameters"):
+        rls(y, u, (1, 1, 1), forgetting=1e-300)
+    with pytest.raises(InputError, match=r"lambda >= 1 - 1/4 = 0.75"):
+        rls(y, u, (2, 2, 1), forgetting=0.7)
+    assert np.all(np.isfinite(rls(y, u, (2, 2, 1), forgetting=0.75).theta))
+
+
+def test_rls_burn_in_outside_the_estimates_is_refused():
+    y, u = _arx_data(300)
+    res = rls(y, u, (1, 1, 1), forgetting=0.99)
+    n = res.errors.size
+    for bad in (-5, n, 1e9, 2.5):
+        with pytest.raises(InputError, match=rf"burn-in must be a whole number of estimates "
+                                             rf"from 0 to {n - 1}"):
+            res.prediction_mse(bad)
+    assert res.prediction_mse(n - 1) == res.errors[-1] ** 2
+
+
+def test_choose_forgetting_leaves_out_defaults_below_the_memory_bound():
+    from workbench.identify.rls import choose_forgetting
+    y, u = _arx_data(2000)
+    choice = choose_forgetting(y, u, (10, 10, 1))            # 20 parameters: lambda >= 0.95
+    assert min(choice.candidates) == 0.95 and 0.9 not in choice.candidates
