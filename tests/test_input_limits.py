@@ -155,3 +155,59 @@ def test_check_json_reports_the_plausibility_numbers(capsys):
     assert got["choked_flow_kg_s"] == pytest.approx(6.23e-9 * 5.0e5 * 1.185, rel=1e-12)
     # 10 s at 10 ms = 1000 samples x 8 bytes x (time + command + states + outputs)
     assert got["run_bytes_10s"] == pytest.approx(1000 * 8 * 13, rel=0.5)
+
+
+@pytest.fixture(scope="module")
+def beyond_stroke(tmp_path_factory):
+    """A recording whose x leaves the 0.5 m stroke of the situm rig (0.1 .. 0.9 m)."""
+    t = np.arange(1001) * 1e-3
+    path = tmp_path_factory.mktemp("stroke") / "rec.csv"
+    Recording.from_arrays(t, u=np.full(t.size, 5.0), x=np.linspace(0.1, 0.9, t.size),
+                          r=np.full(t.size, 0.3)).to_csv(path)
+    return path
+
+
+@pytest.mark.parametrize("command, extra", [(["simulate"], []),
+                                            (["diagnose"], ["--no-report"]),
+                                            (["identify", "greybox"], ["--params", "load.mass"])])
+def test_cli_commands_check_the_recording_against_the_plant(command, extra, beyond_stroke,
+                                                            tmp_path, capsys):
+    # The issue's diagnose case ("no finding ... fit of -2.7e134 %") is now refused on
+    # loading, before any computation, by every command that has the plant.
+    plant = ROOT / "designs/plants/situm_rodless.toml"
+    argv = command + [str(plant), str(beyond_stroke), "--out", str(tmp_path / "out"), *extra]
+    start = time.perf_counter()
+    assert main(argv) == 2
+    assert time.perf_counter() - start < 30.0            # refused on loading, no replay
+    err = capsys.readouterr().err
+    assert "column 'x'" in err and "outside the stroke [0, 0.5] m" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_rls_forgetting_with_less_memory_than_parameters_is_refused():
+    # --forgetting 1e-300 ran to NaN estimates (P / lambda overflows) and was written
+    y, u = _arx_data(300)
+    with pytest.raises(InputError, match=r"forgetting factor 1e-300 remembers about 1 "
+                                         r"samples, fewer than the 2 parameters"):
+        rls(y, u, (1, 1, 1), forgetting=1e-300)
+    with pytest.raises(InputError, match=r"lambda >= 1 - 1/4 = 0.75"):
+        rls(y, u, (2, 2, 1), forgetting=0.7)
+    assert np.all(np.isfinite(rls(y, u, (2, 2, 1), forgetting=0.75).theta))
+
+
+def test_rls_burn_in_outside_the_estimates_is_refused():
+    y, u = _arx_data(300)
+    res = rls(y, u, (1, 1, 1), forgetting=0.99)
+    n = res.errors.size
+    for bad in (-5, n, 1e9, 2.5):
+        with pytest.raises(InputError, match=rf"burn-in must be a whole number of estimates "
+                                             rf"from 0 to {n - 1}"):
+            res.prediction_mse(bad)
+    assert res.prediction_mse(n - 1) == res.errors[-1] ** 2
+
+
+def test_choose_forgetting_leaves_out_defaults_below_the_memory_bound():
+    from workbench.identify.rls import choose_forgetting
+    y, u = _arx_data(2000)
+    choice = choose_forgetting(y, u, (10, 10, 1))            # 20 parameters: lambda >= 0.95
+    assert min(choice.candidates) == 0.95 and 0.9 not in choice.candidates

@@ -609,7 +609,8 @@ _COMBOS = [c for r in range(len(_STATE_EFFECTS) + 1)
 def _combo_plant(tmp_path, combo):
     if combo == "affine":
         return _affine_plant()
-    return Plant.from_toml(write_plant(tmp_path / "p.toml", combo, {"lines.segments": 2}))
+    segments = {"lines.segments": 2} if "line_dynamics" in combo else {}  # alone: refused
+    return Plant.from_toml(write_plant(tmp_path / "p.toml", combo, segments))
 
 
 @pytest.mark.parametrize("combo", _COMBOS, ids=lambda c: "+".join(c) or "basic")

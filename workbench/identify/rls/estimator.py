@@ -124,9 +124,21 @@ class RlsResult:
         return float(np.mean(self.effective_forgetting > self.forgetting * (1 + 1e-12)))
 
     def prediction_mse(self, burn_in: int = 0) -> float:
-        """Mean squared a priori prediction error after ``burn_in`` estimates, output unit^2."""
+        """Mean squared a priori prediction error after ``burn_in`` estimates, output unit^2.
+
+        Raises
+        ------
+        InputError
+            Unless ``burn_in`` is a whole number from 0 to the number of estimates - 1
+            (a negative one would count from the end, a larger one leave nothing).
+        """
+        n = int(self.errors.size)
+        if (isinstance(burn_in, bool) or not isinstance(burn_in, (int, np.integer, float))
+                or not float(burn_in).is_integer() or not 0 <= burn_in <= n - 1):
+            raise InputError(f"burn-in must be a whole number of estimates from 0 to {n - 1}, "
+                             f"got {burn_in!r}")
         e = self.errors[int(burn_in):]
-        return float(np.mean(e * e)) if e.size else float("nan")
+        return float(np.mean(e * e))
 
     # ---- export ------------------------------------------------------------------------
     def to_pandas(self) -> "pandas.DataFrame":
@@ -237,6 +249,12 @@ def _as_signal(x: Any, what: str, sample_time: float | None = None,
         raise InputError(f"{what} is {kind} at {_where(k, sample_time, time)}{more}; "
                          "remove or repair those samples before identification")
     return arr
+
+
+def min_forgetting(npar: int) -> float:
+    """Smallest forgetting factor whose memory ``1 / (1 - lambda)`` (samples) is at least
+    the number of parameters ``npar``: ``1 - 1 / npar``."""
+    return 1.0 - 1.0 / max(int(npar), 1)
 
 
 def check_forgetting(lam: Any, what: str = "forgetting factor lambda") -> float:
@@ -402,6 +420,13 @@ def rls(y: Any, u: Any, orders: Sequence[int], forgetting: float = 0.99,
     """
     yarr, uarr, orders, sample_time, tarr = _prepare(y, u, orders, sample_time, time)
     lam = check_forgetting(forgetting)
+    lowest = min_forgetting(orders[0] + orders[1])
+    if lam < lowest:
+        raise InputError(
+            f"forgetting factor {lam:g} remembers about {1.0 / (1.0 - lam):.3g} samples, "
+            f"fewer than the {orders[0] + orders[1]} parameters: the estimate is not "
+            f"determined by the data (and P / lambda overflows for tiny lambda); use "
+            f"lambda >= 1 - 1/{orders[0] + orders[1]} = {lowest:.4g}")
     if method not in _METHODS:
         raise InputError(f"method must be one of {', '.join(_METHODS)}, got {method!r}")
     na, nb, _ = orders

@@ -11,7 +11,7 @@ import numpy as np
 from ...errors import InputError
 from ...params import json_safe
 from .estimator import (RlsResult, _prepare, _start_index, check_forgetting, default_burn_in,
-                        rls)
+                        min_forgetting, rls)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -76,7 +76,9 @@ def choose_forgetting(y: Any, u: Any, orders: Sequence[int],
     y, u, orders
         As for :func:`rls`.
     candidates : sequence of float
-        Forgetting factors to try, each in (0, 1].
+        Forgetting factors to try, each in (0, 1] and at least ``1 - 1/(na + nb)``
+        (a memory of as many samples as parameters); of the defaults, those below are
+        left out.
     burn_in : int, optional
         Estimates left out at the start, where the prior still dominates; default
         ``max(10 (na + nb), N / 10)``.
@@ -107,6 +109,8 @@ def choose_forgetting(y: Any, u: Any, orders: Sequence[int],
                                       kwargs.get("time"))
     n_est = yarr.size - _start_index(ords)
     npar = ords[0] + ords[1]
+    if tuple(candidates) == DEFAULT_CANDIDATES:   # the defaults that suit these orders
+        cands = tuple(c for c in cands if c >= min_forgetting(npar))
     if burn_in is None:
         burn_in = default_burn_in(n_est, npar)
     burn_in = int(burn_in)
