@@ -187,13 +187,14 @@ def test_status_words_are_one_vocabulary():
 # --------------------------------------------------------------------------- columns, headers
 
 def test_empty_columns_are_not_shown(tmp_path):
-    rows = [["P", None, 1.0, ""], ["PD", None, 2.5, "-"]]
+    rows = [["P", None, 1.0, "", "-"], ["PD", float("nan"), 2.5, " ", "n/a"]]
     html_path, pdf_path = write(tmp_path, [rp.Section("s", [
-        rp.Table(["controller", "nothing", "kp", "blank"], rows, units=["", "m", "V/m", "s"],
-                 caption="gains")])])
+        rp.Table(["controller", "nothing", "kp", "blank", "failing check"], rows,
+                 units=["", "m", "V/m", "s", ""], caption="gains")])])
     header, units, *body = html_tables(html_path)[0]
-    assert header == ["controller", "kp"] and units == ["", "[V/m]"]
-    assert body == [["P", "1.0"], ["PD", "2.5"]]   # one format: 1.0, not 1
+    # "-" and "n/a" were typed by the design: that column says something, it stays
+    assert header == ["controller", "kp", "failing check"] and units == ["", "[V/m]", ""]
+    assert body == [["P", "1.0", "-"], ["PD", "2.5", "n/a"]]   # one format: 1.0, not 1
     text = " ".join(p.extract_text() for p in PdfReader(pdf_path).pages)
     assert "kp" in text and "nothing" not in text and "blank" not in text
     # a table without rows keeps its header

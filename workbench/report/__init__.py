@@ -17,6 +17,12 @@ Build a :class:`Report` from immutable blocks holding results computed elsewhere
     )
     html_path, pdf_path = rp.write(doc, "reports/situm_pd")
 
+Layout rules every report gets (see :mod:`.columns` and :mod:`.pdf_flow`): one
+number format per table column (numbers given as text included), one verdict
+vocabulary (PASS / FAIL / NOTE / ERROR; "PASSED" is shown as PASS), no column
+without a value, headers that never wrap inside a formula, and PDF pages that are
+not left half empty before a figure or table that did not fit.
+
 A design that fails still leaves a report saying what failed::
 
     except Exception as exc:

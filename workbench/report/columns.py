@@ -18,8 +18,10 @@ Rules the renderers share (both :mod:`.html` and :mod:`.pdf` use them, through
 * **One status vocabulary.** ``PASS``/``FAIL`` (and ``NOTE``/``ERROR`` in
   banners); ``"passed"``, ``"PASSED"``, ``"fail"``, ``"FAILED"`` ... are accepted and
   shown as ``PASS``/``FAIL``.
-* **Empty cells.** ``None``, ``""``, ``"-"``, ``"n/a"`` count as empty; a column
-  whose cells are all empty is dropped from the rendered table.
+* **Empty cells.** ``None``, NaN, ``""``, ``"-"``, ``"n/a"`` are missing values
+  (they do not make a number column text). A column with nothing in any row
+  (None, NaN or blank text) is dropped from the rendered table; a column of
+  ``"-"`` or ``"n/a"`` typed by the design says something and is kept.
 * **Headers break between words, never inside a formula or between a number and
   its unit** (:func:`keep_formulas`): those spaces become no-break spaces.
 """
@@ -75,6 +77,13 @@ def is_empty(value: Any) -> bool:
     if isinstance(value, numbers.Real) and not _is_bool(value):
         return math.isnan(float(value))
     return False
+
+
+def _blank(value: Any) -> bool:
+    """Nothing at all: None, NaN or blank text (a typed "-" or "n/a" is something)."""
+    if isinstance(value, str):
+        return not value.strip()
+    return is_empty(value)
 
 
 def number_text(value: Any) -> tuple[str, float | int, str] | None:
@@ -241,7 +250,7 @@ def table_view(columns: Sequence[str], units: Sequence[str] | None, rows: Sequen
     ncol = len(columns)
     cols = [[r[j] for r in rows] for j in range(ncol)]
     keep = [j for j in range(ncol) if not (drop_empty and rows
-                                           and all(is_empty(c) for c in cols[j]))]
+                                           and all(_blank(c) for c in cols[j]))]
     keep = keep or list(range(ncol))
     kinds, texts, values = [], [], []
     for j in keep:

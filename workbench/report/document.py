@@ -346,8 +346,8 @@ class Table(Block):
     def view(self) -> TableView:
         """What the renderers show: columns with a value, kinds, one format per column.
 
-        Columns whose cells are all empty (None, NaN, ``""``, ``"-"``, ``"n/a"``)
-        are dropped, unless every column is; headers keep formulas and number-unit
+        Columns with nothing in any row (None, NaN, blank text) are dropped,
+        unless every column is; headers keep formulas and number-unit
         pairs on one line (:func:`.columns.keep_formulas`).
         """
         return table_view(self.columns, self.units, self.rows, self.digits)
