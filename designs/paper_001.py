@@ -67,26 +67,25 @@ SEGMENTS = {1.0: 8, 10.0: 40}
 SEGMENTS_QUICK = {1.0: 8, 10.0: 20}
 #: PID design rules (see the module docstring) and the back-off per failed validation.
 GAIN_MARGIN = 3.0
-#: Ti = (the specification's settling time) / TI_SETTLING: an offset the integral
-#: removes decays as exp(-t/Ti), to e^-4 = 1.8 % (inside the 2 % band) within the
-#: settling time. Measured (quick): Ti = 10/K0 = 1.55 s leaves 1.6 mm of a 3 mm
-#: offset at the hold ends.
+#: Ti = (specified settling time) / TI_SETTLING: an offset decays as exp(-t/Ti), to
+#: e^-4 = 1.8 % (inside the 2 % band) within it. Measured (quick): Ti = 10/K0 = 1.55 s
+#: leaves 1.6 mm of a 3 mm offset at the hold ends.
 TI_SETTLING = 4.0
-#: Integral separation band = BAND_FLOORS x the specification's band floor (1 mm):
-#: the integral collects only within 2 mm of the setpoint, so it removes the rest
-#: errors that fail the 1 mm specification (valve null offsets up to kp x 2 mm =
-#: 0.02 V) while the error area it collects on a >= 100 mm step stays small.
-#: Measured (quick, Ti = 0.375 s): 2 mm passes on both lines, 3 mm too with larger
-#: hold-end errors (0.65 mm against 0.41 mm); without the band the loop fails.
+#: Integral separation band = BAND_FLOORS x the spec's 1 mm band floor: it removes rest
+#: errors that fail the 1 mm spec (null offsets up to kp x 2 mm = 0.02 V) while the error
+#: area collected on a >= 100 mm step stays small. Measured (quick, Ti = 0.375 s): 2 mm
+#: and 3 mm pass on both lines (hold-end errors 0.41, 0.65 mm); no band fails.
 BAND_FLOORS = 2.0
-#: Valve null offset of the demonstration (the valve's zero-flow command 5.015 V, the
-#: controller's centre 5 V): ASSUMED 0.3 % of the span; a PD loop then rests
-#: offset / kp = 1.5 mm short, beyond the 1 mm specification.
+#: Valve null offset of the demonstration, V (zero-flow command 5.015 V, controller's
+#: centre 5 V): ASSUMED; a PD loop then rests offset / kp = 1.5 mm short.
 NULL_OFFSET = 0.015
 BACKOFF, TRIES = 0.8, 5
 #: Tube bores of the sensitivity study, m (the paper gives none; 2 .. 6 mm are the
 #: usual polyurethane tubes of 4 .. 8 mm outside diameter).
 BORES = [0.002, 0.003, 0.006]
+#: Single setpoint steps of the sensitivity study, m (the paper: 'within the working
+#: stroke', no size). Measured (quick): 0.1 m steps shift 0.045 s, 0.4 m 0.14 s.
+STEPS = [0.1, 0.4]
 #: Agreement with the paper's 0.4 s: +- 0.2 s. The paper's bore, load, supply, tube
 #: bore and gains are unknown; the report measures how far the tube bore alone moves it.
 DT_TOL = 0.2
@@ -132,16 +131,12 @@ def line_step(plant: Plant) -> dict:
 
 @dataclass(frozen=True)
 class BandedPID:
-    """The workbench PID law (:func:`workbench.controllers.pd.pid_law`: conditional
-    integration while saturated) whose integral also holds while |e| > integral_band
-    (m): integral separation. A drive that integrates and carries no constant load
-    rests at the valve's null, so its integral must end each step where it began:
-    the error area the integral collects on the way must be paid back as overshoot.
-    Collecting only inside the band keeps that area, and the overshoot, small.
-
-    Not a subclass of :class:`workbench.controllers.PID` on purpose: code that reads a
-    PID's gains to run its own copy of the law (compiled loops, diagnosis) must refuse
-    this controller rather than run it without its band. Units as in PID.
+    """:func:`workbench.controllers.pd.pid_law` (integral held while saturated) with the
+    integral also held while |e| > integral_band (m): integral separation. A no-load
+    integrating drive rests at the valve's null, so the integral must end each step
+    where it began and the error area it collects comes back as overshoot; collected
+    only inside the band, that area is small. Not a PID subclass on purpose: code that
+    re-runs a PID's gains (compiled loop, diagnosis) must refuse it, not drop the band.
     """
 
     kp: float
@@ -168,16 +163,12 @@ class BandedPID:
         return (e, integ), u
 
 
-def design_pid(plant10: Plant, spec: validate.Specification) -> tuple[BandedPID,
-                                                                      controllers.PID, dict]:
-    """PID from the 10 m drive's exact tangent model at mid-stroke.
-
-    K0 = (exact sampled-data P limit) / GAIN_MARGIN, kp = K0 / Kv; Td = 1/w0 (the
-    derivative zero at the air spring's natural frequency adds phase lead where the
-    lightly damped mode is); Ti = spec.max_settling_time / TI_SETTLING; integral
-    separation band BAND_FLOORS x spec.band_floor (see :class:`BandedPID`).
-    Returns (the PID, the same without integral (PD), design figures).
-    """
+def design_pid(plant10: Plant, spec: validate.Specification) -> tuple:
+    """(PID, the same without integral, design figures) from the 10 m drive's exact
+    tangent model at mid-stroke: K0 = (exact sampled-data P limit) / GAIN_MARGIN,
+    kp = K0 / Kv; Td = 1/w0 (derivative zero at the air spring's natural frequency,
+    phase lead at the lightly damped mode); Ti = spec.max_settling_time / TI_SETTLING;
+    integral band BAND_FLOORS x spec.band_floor (:class:`BandedPID`)."""
     red = linearize.reduced_position_model(linearize.tangent(plant10, x=0.25))
     T = float(plant10.params["controller.sample_time"])
     lim = stability.limits_from_plant(plant10, 0.25, sample_time=T, k0=1.0)
@@ -266,18 +257,23 @@ def transient_difference(vals: dict) -> dict:
             "half_1m": h1, "half_10m": h10, "settle_1m": s1, "settle_10m": s10}
 
 
-def bore_sensitivity(pid, ref, spec, bores, quick: bool) -> list[dict]:
-    """The same PID with other tube bores (the paper gives none), bores in m."""
+def sensitivity(pid, ref, spec, cases, quick: bool) -> list[dict]:
+    """The same PID with another tube bore (m; the paper gives none) or on single
+    setpoint steps of another size (m, up from 50 mm and back; the paper gives none):
+    ``cases`` of (bore or None, step or None)."""
     rows = []
-    for d in bores:
+    for d, step in cases:
         pls = plants(quick, diameter=d)
-        vals = {L: validate.validate(pl, pid, spec=spec, reference=ref, progress=False)
+        r = ref if step is None else references.steps([0.05, 0.05 + step, 0.05], hold=2.0)
+        vals = {L: validate.validate(pl, pid, spec=spec, reference=r, progress=False)
                 for L, pl in pls.items()}
         td = transient_difference(vals)
-        rows.append({"diameter": d, "shift": td["shift"], "settling": td["settling"],
+        rows.append({"diameter": float(pls[1.0].params["lines.diameter"]), "step": step,
+                     "shift": td["shift"], "settling": td["settling"],
                      "delay": line_step(pls[10.0])["delay"] - line_step(pls[1.0])["delay"],
                      "passed": all(v.passed for v in vals.values())})
-        print(f"    tube bore {d * 1e3:g} mm: transient shift {td['shift']:.3f} s")
+        print(f"    tube bore {rows[-1]['diameter'] * 1e3:g} mm, steps "
+              f"{'staircase' if step is None else f'{step:g} m'}: shift {td['shift']:.3f} s")
     return rows
 
 
@@ -336,7 +332,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         sections.append(_pid_section(pid, info, vals, compare, tries))
     with rp.step("position transients"):
         td = transient_difference(vals)
-        bores = bore_sensitivity(pid, ref, spec, [0.002] if quick else BORES, quick)
+        cases = [(d, None) for d in ([0.002] if quick else BORES)] + [
+            (None, st) for st in ([0.4] if quick else STEPS)]
+        bores = sensitivity(pid, ref, spec, cases, quick)
         sections.append(_transient_section(td, bores, pls))
     with rp.step("write report"):
         results = _results(steps, td, vals)
@@ -468,13 +466,15 @@ def _transient_section(td, bores, pls) -> rp.Section:
         rp.Table(["step", "half-way 1 m", "half-way 10 m", "shift", "settling 1 m",
                   "settling 10 m", "difference"], rows, units=["", "s", "s", "s", "s", "s", "s"],
                  caption="Transient of each setpoint step"),
-        rp.Table(["tube bore", "pressure delay 10 m - 1 m", "transient shift",
+        rp.Table(["tube bore", "setpoint steps", "pressure delay 10 m - 1 m", "transient shift",
                   "settling difference", "PID validated on both"],
-                 [[f"{b['diameter'] * 1e3:g}", f"{b['delay'] * 1e3:.1f}", f"{b['shift']:.3f}",
-                   f"{b['settling']:.3f}", b["passed"]] for b in bores],
-                 units=["mm", "ms", "s", "s", ""],
+                 [[f"{b['diameter'] * 1e3:g}", "as above" if b["step"] is None else
+                   f"{b['step'] * 1e3:g} mm up and back", f"{b['delay'] * 1e3:.1f}",
+                   f"{b['shift']:.3f}", f"{b['settling']:.3f}", b["passed"]] for b in bores],
+                 units=["mm", "", "ms", "s", "s", ""],
                  caption=f"The same PID with other tube bores (the plant file's: "
-                         f"{prm['lines.diameter'] * 1e3:g} mm); the paper gives none"),
+                         f"{prm['lines.diameter'] * 1e3:g} mm) and step sizes; the paper gives "
+                         "neither"),
     ])
 
 
@@ -535,6 +535,8 @@ def _disagreement_section(results, steps, td, bores) -> rp.Section:
     bad = [r["result"] for r in results if not r["agrees"]]
     blocks = [rp.Paragraph("Rows that do not agree: " + ("; ".join(bad) if bad else "none") + ".")]
     if any(r.startswith(("transition time", "position transient")) for r in bad):
+        steps_ = [b for b in bores if b["step"] is not None]
+        bores = [b for b in bores if b["step"] is None]
         near = min(bores, key=lambda b: abs(b["shift"] - PAPER["dt"][0])) if bores else None
         blocks.append(rp.Paragraph(
             f"Transient shift {td['shift']:.3f} s against the paper's 0.4 s. The transport delay "
@@ -546,7 +548,10 @@ def _disagreement_section(results, steps, td, bores) -> rp.Section:
                         for b in bores)
             + (f". The paper's 0.4 s is closest with a {near['diameter'] * 1e3:g} mm bore "
                f"({near['shift']:.2f} s): the paper's rig likely had narrower tubes than "
-               "assumed here." if near else ".")))
+               "assumed here" if near else "")
+            + "".join(f"; with single {b['step'] * 1e3:g} mm steps (assumed bore) the shift is "
+                      f"{b['shift']:.2f} s" for b in steps_)
+            + ": the shift grows with the step size. The paper's numbers fix neither."))
     if any(r.startswith("pressure delay") for r in bad):
         blocks.append(rp.Paragraph(
             f"Measured delays: 1 m {steps[1.0]['delay'] * 1e3:.1f} ms, 10 m "

@@ -96,6 +96,16 @@ def test_tube_bore_explains_the_papers_0_4_s(run):
     assert row["agrees"] == (abs(row["workbench"] - PAPER_DT) <= 0.2)
 
 
+def test_step_size_moves_the_shift(run):
+    """The other size the paper does not give: with the assumed 4 mm bore, a single
+    400 mm step up and back shifts the 10 m transient clearly more than the 150 mm
+    staircase steps (measured 0.14 s against 0.05 s; 1.5x leaves room for either)."""
+    s = run[1]
+    big = next(b for b in s["tube_bore_sweep"] if b["step"] == 0.4)
+    assert big["diameter"] == pytest.approx(0.004)
+    assert big["shift"] > 1.5 * s["transients_s"]["shift"]
+
+
 def test_pid_designed_and_validated_on_both(run):
     s = run[1]
     pid = s["pid"]
