@@ -73,7 +73,8 @@ class _Shifted:
 
 
 class PlainRTI(_Shifted):
-    """Gauss-Newton real-time iteration: one sparse QP per sample.
+    """Gauss-Newton real-time iteration: one sparse QP per sample, the model's interval
+    sensitivities (``pb.Fj``) in the constraint Jacobian.
 
     ``qp="osqp"``: the osqp package (set up once, updated in place, warm started;
     ``eps`` its tolerances, polishing on; the initial ADMM step ``rho`` 1e3 instead of
@@ -90,7 +91,7 @@ class PlainRTI(_Shifted):
         super().__init__(nmpc)
         w, p, f, g = (self.nlp[k] for k in ("x", "p", "f", "g"))
         nw = w.shape[0]
-        lin = ca.Function("wb_rti_lin", [w, p], [ca.gradient(f, w), g, ca.jacobian(g, w)])
+        lin = ca.Function("wb_rti_lin", [w, p], [ca.gradient(f, w), g, self._jacobian(w, p, g)])
         self.lin = compiled(lin)            # MX: the interval map's derivatives mapped, not unrolled
         H = ca.Function("h", [w, p], [ca.hessian(f, w)[0]])(np.zeros(nw), np.zeros(p.shape[0]))
         self.H = H + regularisation * ca.DM.eye(nw)       # constant; strictly convex
@@ -118,6 +119,24 @@ class PlainRTI(_Shifted):
                 if qp == "qpoases" else {"error_on_fail": False}
             self.qp = ca.conic("wb_rti_qp", qp, {"h": self.H.sparsity(), "a": sa}, opts)
         self.u_prev = 0.0
+
+    def _jacobian(self, w, p, g):
+        """dg/dw with the model's interval sensitivities (``pb.Fj``: what the NMPC's own
+        QP uses; the exact derivative of RK4 through the stiff chamber modes is not a
+        usable linearisation): g with each defect's F(X_k, U_k) replaced by its
+        linearisation at the current w, differentiated there."""
+        pb = self.pb
+        N, nx = pb.N, pb.nx
+        v = ca.MX.sym("v", w.shape[0])                    # where the Jacobian is taken
+        X, U = ca.reshape(w[:nx * (N + 1)], nx, N + 1), w[nx * (N + 1):nx * (N + 1) + N].T
+        Xv, Uv = ca.reshape(v[:nx * (N + 1)], nx, N + 1), v[nx * (N + 1):nx * (N + 1) + N].T
+        Fn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.MX.zeros(1, N))
+        lin = [Fn[:, k] + ca.mtimes(A[:, k * nx:(k + 1) * nx], Xv[:, k] - X[:, k])
+               + B[:, k] * (Uv[0, k] - U[0, k]) for k in range(N)]
+        n0 = nx * (N + 1)
+        gv = ca.vertcat(Xv[:, 0] - p[:nx], ca.vec(ca.horzcat(*lin) - Xv[:, 1:]),
+                        ca.jacobian(g[n0:], w) @ v)       # the soft rows are linear in w
+        return ca.substitute(ca.jacobian(gv, v), v, w)
 
     def _solve(self, grad, g, G, w) -> np.ndarray | None:
         lba, uba = self.lbg - g, self.ubg - g
