@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.output import write_json
 from workbench import Plant, compare, plots, simulate
 from workbench import report as rp
 from workbench import validate
@@ -397,8 +398,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "pd": {"kp": pd.kp, "kd": pd.kd, "rho": rho_pd}, "rho_file_pd": rho_file,
                    "metrics": mets, "quick": bool(quick),
                    "validations": {k: v.to_dict() for k, v in runs.items()}}
-        atomic_write_text(out / "summary.json",
-                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
+        write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
     print(f"design {status.outcome}: {status.message}\n  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
 

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.output import write_json
 from workbench import Plant, plots, simulate
 from workbench import report as rp
 from workbench.controllers.force import (PLAN_RULES, DriveModel, force_tracker,
@@ -447,8 +448,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                                                                "rms_error": o.score}
                                               for (pn, c), o in mc_nominal.items()},
                                   "results": {pn: res.to_dict() for pn, res in mc.items()}}}
-        atomic_write_text(out / "summary.json",
-                          json.dumps(json_safe(summary), indent=1, default=rp.json_default) + "\n")
+        write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
     print(f"design {status.outcome}: {status.message}\n  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
 

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.output import write_json
 from workbench import Plant, compare, controllers, plots, simulate
 from workbench import report as rp
 from workbench import validate
@@ -337,8 +338,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                                     "ok": c[-1]} for c in cons],
                    "solve_time": stats, "validation_nmpc": v_n.to_dict(),
                    "validation_pd": v_p.to_dict(), "quick": quick}
-        atomic_write_text(out / "summary.json",
-                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
+        write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
     print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1

@@ -53,6 +53,7 @@ if str(HERE) not in sys.path:                 # the sibling design scripts own t
 import fl_position  # noqa: E402
 import nmpc_position  # noqa: E402
 
+from workbench.output import write_json
 from workbench import compare, plots  # noqa: E402
 from workbench import report as rp  # noqa: E402
 from workbench import validate  # noqa: E402
@@ -364,8 +365,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "iae_ratio_pd_over_nmpc_full": iae_ratio,
                    "iae_ratio_pd_over_fl_full": (figs["full"]["PD"]["iae"]
                                                  / figs["full"]["FL"]["iae"])}
-        atomic_write_text(out / "summary.json",
-                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
+        write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
     print(f"design {status.outcome}: {status.message}\n  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
 

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.output import write_json
 from workbench import Plant, plots, simulate
 from workbench import report as rp
 from workbench.controllers.force import PLAN_RULES, DriveModel, motion_force, pressure_plan
@@ -400,8 +401,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "bound": bound, "waypoints": [list(map(float, p)) for p in zip(ref.t, ref.x)],
                    "force_peak": float(np.max(np.abs(force))),
                    "plans": plan_sum, "metrics": mets, "errors": errors}
-        atomic_write_text(out / "summary.json",
-                          json.dumps(json_safe(summary), indent=1, default=rp.json_default) + "\n")
+        write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
     print(f"design {status.outcome}: {status.message}\n  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
 

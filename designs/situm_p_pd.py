@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.output import write_json
 from workbench import Plant, controllers, linearize, plots
 from workbench import report as rp
 from workbench import stability, validate
@@ -375,7 +376,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "validation_p": v_p.to_dict(), "validation_pd": v_pd.to_dict(),
                    "arx_poles": [[float(z.real), float(z.imag)] for z in arx_poles],
                    "pct_poles": [[float(z.real), float(z.imag)] for z in pct_poles]}
-        atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=rp.json_default) + "\n")
+        write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
     print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1

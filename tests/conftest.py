@@ -182,12 +182,18 @@ def central_jacobian(fun, x, u: float, x_scales, u_step: float):
 #: validate.Specification's documented defaults (its docstring; formats.md).
 SPEC_DEFAULTS = {"max_overshoot": 10.0, "max_settling_time": 1.5, "settling_band": 0.02,
                  "band_floor": 1e-3, "max_steady_state_error": 1e-3, "steady_state_window": 0.5,
-                 "max_saturation": 0.1, "max_ramp_error": 0.02, "pressure_tolerance": 2e4}
+                 "max_saturation": 0.1, "max_ramp_error": 0.02, "pressure_tolerance": 2e4,
+                 # no sine limit by default: inf, which strict JSON writes as null
+                 "max_sine_error": None, "name": ""}
 RHO_ANR_KG_M3 = 1.185          # physics.md: ISO 6358 / ANR reference density
 
 
 def close_value(a, b, what, rel=1e-9, abs_=1e-12):
-    """a == b to rounding, NaN == NaN and inf == inf."""
+    """a == b to rounding, NaN == NaN and inf == inf; ``a`` None (strict JSON writes a
+    non-finite number as null) matches a non-finite ``b`` only."""
+    if a is None:
+        assert b is None or not math.isfinite(float(b)), (what, a, b)
+        return
     a, b = float(a), float(b)
     if math.isnan(b) or math.isinf(b):
         assert (math.isnan(a) and math.isnan(b)) or a == b, (what, a, b)
@@ -282,6 +288,9 @@ def check_validation(v, df, u_limits=(0.0, 10.0), p_atm=101325.0, p_s=6e5):
                             "ramp tracking error", "command saturation",
                             "min chamber pressure", "max chamber pressure"]
     for c in v["checks"]:
+        if c["value"] is None:          # non-finite (e.g. never settled) as strict JSON null
+            assert c["passed"] is False, c
+            continue
         ok = c["value"] <= c["limit"] if c["bound"] == "max" else c["value"] >= c["limit"]
         assert c["passed"] is bool(ok), c
     steps = [s for s in segs if s["kind"] == "step"]
@@ -290,7 +299,8 @@ def check_validation(v, df, u_limits=(0.0, 10.0), p_atm=101325.0, p_s=6e5):
         steps, key=lambda s: s["overshoot"] / max(spec["max_overshoot"], 100 * spec["band_floor"]
                                                    / abs(s["r_end"] - s["r_start"])))["overshoot"],
         "worst overshoot")
-    close_value(checks["settling time"]["value"], max(s["settling_time"] for s in steps), "settling")
+    close_value(checks["settling time"]["value"], max(
+        math.inf if s["settling_time"] is None else s["settling_time"] for s in steps), "settling")
     close_value(checks["settling time"]["limit"], spec["max_settling_time"], "settling limit")
     close_value(checks["steady-state error"]["value"], max(
         s["steady_state_error"] for s in segs if s["kind"] in ("step", "hold")), "sse")
@@ -316,11 +326,17 @@ def check_figures(f, v, df, air_bound=None):
         if s["kind"] == "step":
             settled &= ~((t >= s["start"]) & (t < s["start"] + 0.5))
     steps = [s for s in segs if s["kind"] == "step"]
-    fin = lambda vals: max((q for q in vals if not math.isnan(q)), default=math.nan)  # noqa: E731
+    # strict JSON writes non-finite numbers as null: a step that never settles has an
+    # infinite settling time (null = inf); its other figures are NaN when undefined (null =
+    # NaN, skipped like NaN by compare.run_figures)
+    def fin(vals, none=math.nan):
+        vals = [none if q is None else q for q in vals]
+        return max((q for q in vals if not math.isnan(q)), default=math.nan)
     close_value(f["iae"], v["metrics"]["iae"], "iae")
     close_value(f["max_error"], e.max(), "max_error")
     close_value(f["max_error_settled"], e[settled].max(), "max_error_settled")
-    close_value(f["settling_time"], fin(s["settling_time"] for s in steps), "settling_time")
+    close_value(f["settling_time"], fin((s["settling_time"] for s in steps), math.inf),
+                "settling_time")
     close_value(f["overshoot"], fin(s["overshoot"] for s in steps), "overshoot")
     close_value(f["overshoot_abs"], fin(s["overshoot_abs"] for s in steps), "overshoot_abs")
     close_value(f["steady_state_error"], fin(s["steady_state_error"] for s in segs

@@ -263,16 +263,18 @@ def sigterm_as_exception() -> Iterator[None]:
         yield
 
 
-def write_json(path: str | os.PathLike, value, *, indent: int | None = 2) -> None:
+def write_json(path: str | os.PathLike, value, *, indent: int | None = 2,
+               default=None) -> None:
     """Write ``value`` as strict JSON: NaN and inf become null (JSON has no such
     tokens; strict readers reject them), numpy scalars and arrays plain numbers/lists.
 
     The file is written whole or not at all (a temporary file renamed into place).
+    ``default`` is passed to :func:`json.dumps` for objects JSON does not know.
     """
     import json
     from .params import atomic_write_text
-    atomic_write_text(path, json.dumps(strict_json(value), indent=indent, allow_nan=False)
-                      + "\n")
+    atomic_write_text(path, json.dumps(strict_json(value), indent=indent, allow_nan=False,
+                                       default=default) + "\n")
 
 
 def strict_json(value):
