@@ -278,6 +278,18 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                          "themselves must not be touched."),
             rp.Table(["run", "quantity", "min", "max", "limits", "unit", "within"], cons,
                      caption="Constraint satisfaction, NMPC"),
+            rp.Paragraph("At the stroke margin: a reference beyond it is projected onto the "
+                         "usable stroke before the NMPC tracks it (the stroke limit then stays "
+                         "inactive; tracking the unreachable reference put the optimum on the "
+                         "exact penalty's kink, and the lines' delay moved it across every "
+                         "sample: the command chattered by +-0.5 V and p_b by +-1 bar, an "
+                         "8 Hz oscillation of +-0.5 mm). What is left is the unmodelled "
+                         "friction's stick-slip: the piston rests at the margin and slips now "
+                         "and then. Second half of each hold beyond the stroke:"),
+            rp.Table(["reference", "command std", "p_a std", "p_b std", "position peak-to-peak"],
+                     _margin_activity(lim, levels, L, nmpc.stroke_margin),
+                     units=["mm", "V", "bar", "bar", "mm"],
+                     caption="Activity at the stroke margin (limit steps)"),
             rp.Figure(_limit_figure(lim, lim_ref, nmpc, plant),
                       "Limit steps: the reference goes beyond the stroke; the NMPC stops at its "
                       "margin (dotted) without touching the end stops, pressures within "
@@ -342,6 +354,21 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
     print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
+
+
+def _margin_activity(run, levels, L, margin, hold=0.8):
+    """Per limit step whose level is beyond the margins: over the second half of its
+    hold, command std (V), pressure stds (bar), position peak-to-peak (mm)."""
+    rows = []
+    t = run.time
+    for k, lv in enumerate(levels):
+        if margin <= lv <= L - margin:
+            continue
+        a, b = (k + 1) * hold + 0.5 * hold, (k + 2) * hold
+        s = (t >= a) & (t < b)
+        rows.append([lv * 1e3, float(np.std(run["u"][s])), float(np.std(run["p_a"][s])) / 1e5,
+                     float(np.std(run["p_b"][s])) / 1e5, float(np.ptp(run["x"][s])) * 1e3])
+    return rows
 
 
 def _limit_figure(run, ref, nmpc, plant):
