@@ -246,6 +246,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                       and x_.max() <= L - nmpc.stroke_margin + STROKE_TOLERANCE)],
             ]
         cons_ok = all(c[-1] for c in cons)
+        margin_rows = _margin_activity(lim, levels, L, nmpc.stroke_margin)
         n_fail = sum(not i.success for i in infos)
         n_restart = sum(i.restarted for i in infos)
         stats = {"median_ms": float(np.median(solve_ms)), "p99_ms": float(np.percentile(solve_ms, 99)),
@@ -287,7 +288,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                          "friction's stick-slip: the piston rests at the margin and slips now "
                          "and then. Second half of each hold beyond the stroke:"),
             rp.Table(["reference", "command std", "p_a std", "p_b std", "position peak-to-peak"],
-                     _margin_activity(lim, levels, L, nmpc.stroke_margin),
+                     margin_rows,
                      units=["mm", "V", "bar", "bar", "mm"],
                      caption="Activity at the stroke margin (limit steps)"),
             rp.Figure(_limit_figure(lim, lim_ref, nmpc, plant),
@@ -347,6 +348,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "iae_ratio_pd_over_nmpc": factor, "constraints_held": cons_ok,
                    "constraints": [{"run": c[0], "quantity": c[1], "min": c[2], "max": c[3],
                                     "ok": c[-1]} for c in cons],
+                   "margin_activity": [{"reference": r[0] * 1e-3, "command_std": r[1],
+                                        "p_a_std": r[2] * 1e5, "p_b_std": r[3] * 1e5,
+                                        "position_p2p": r[4] * 1e-3} for r in margin_rows],
                    "solve_time": stats, "validation_nmpc": v_n.to_dict(),
                    "validation_pd": v_p.to_dict(), "quick": quick}
         atomic_write_text(out / "summary.json",
