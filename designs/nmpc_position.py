@@ -247,6 +247,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                       and x_.max() <= L - nmpc.stroke_margin + STROKE_TOLERANCE)],
             ]
         cons_ok = all(c[-1] for c in cons)
+        margin_rows = _margin_activity(lim, levels, L, nmpc.stroke_margin)
         n_fail = sum(not i.success for i in infos)
         n_restart = sum(i.restarted for i in infos)
         stats = {"median_ms": float(np.median(solve_ms)), "p99_ms": float(np.percentile(solve_ms, 99)),
@@ -279,6 +280,18 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                          "themselves must not be touched."),
             rp.Table(["run", "quantity", "min", "max", "limits", "unit", "within"], cons,
                      caption="Constraint satisfaction, NMPC"),
+            rp.Paragraph("At the stroke margin: a reference beyond it is projected onto the "
+                         "usable stroke before the NMPC tracks it (the stroke limit then stays "
+                         "inactive; tracking the unreachable reference put the optimum on the "
+                         "exact penalty's kink, and the lines' delay moved it across every "
+                         "sample: the command chattered by +-0.5 V and p_b by +-1 bar, an "
+                         "8 Hz oscillation of +-0.5 mm). What is left is the unmodelled "
+                         "friction's stick-slip: the piston rests at the margin and slips now "
+                         "and then. Second half of each hold beyond the stroke:"),
+            rp.Table(["reference", "command std", "p_a std", "p_b std", "position peak-to-peak"],
+                     margin_rows,
+                     units=["mm", "V", "bar", "bar", "mm"],
+                     caption="Activity at the stroke margin (limit steps)"),
             rp.Figure(_limit_figure(lim, lim_ref, nmpc, plant),
                       "Limit steps: the reference goes beyond the stroke; the NMPC stops at its "
                       "margin (dotted) without touching the end stops, pressures within "
@@ -336,12 +349,30 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "iae_ratio_pd_over_nmpc": factor, "constraints_held": cons_ok,
                    "constraints": [{"run": c[0], "quantity": c[1], "min": c[2], "max": c[3],
                                     "ok": c[-1]} for c in cons],
+                   "margin_activity": [{"reference": r[0] * 1e-3, "command_std": r[1],
+                                        "p_a_std": r[2] * 1e5, "p_b_std": r[3] * 1e5,
+                                        "position_p2p": r[4] * 1e-3} for r in margin_rows],
                    "solve_time": stats, "validation_nmpc": v_n.to_dict(),
                    "validation_pd": v_p.to_dict(), "quick": quick}
         write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
     print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
+
+
+def _margin_activity(run, levels, L, margin, hold=0.8):
+    """Per limit step whose level is beyond the margins: over the second half of its
+    hold, command std (V), pressure stds (bar), position peak-to-peak (mm)."""
+    rows = []
+    t = run.time
+    for k, lv in enumerate(levels):
+        if margin <= lv <= L - margin:
+            continue
+        a, b = (k + 1) * hold + 0.5 * hold, (k + 2) * hold
+        s = (t >= a) & (t < b)
+        rows.append([lv * 1e3, float(np.std(run["u"][s])), float(np.std(run["p_a"][s])) / 1e5,
+                     float(np.std(run["p_b"][s])) / 1e5, float(np.ptp(run["x"][s])) * 1e3])
+    return rows
 
 
 def _limit_figure(run, ref, nmpc, plant):

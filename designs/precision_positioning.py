@@ -47,6 +47,8 @@ PUBLISHED = {"steady_state": 0.05e-3, "sine": 0.7e-3}
 PERTURBED = {"friction.coulomb": 22.5, "friction.static": 37.5, "load.mass": 1.32}
 PRESSURE_NOISE = 300.0        # Pa std
 KINDS = ("pid", "fl", "nmpc")
+#: Sensor-noise realisations the NMPC is run with (quick mode: 2).
+SEEDS = 5
 
 
 def main(argv=None) -> int:
@@ -101,6 +103,12 @@ def _design(args, out: Path, done: list) -> int:
         pert = evaluate_design(plant, "nmpc", reference=ref, jit=args.jit, rig=rig,
                                pressure_noise=PRESSURE_NOISE)
         print("perturbed rig:\n" + pert.summary())
+    with rp.step("noise seeds"):
+        seeds = {0: evs["nmpc"]}
+        for seed in range(1, 3 if args.quick else SEEDS):
+            seeds[seed] = evaluate_design(plant, "nmpc", reference=ref, jit=args.jit, seed=seed,
+                                          pressure_noise=PRESSURE_NOISE)
+        done.append(_seed_section(seeds))
     with rp.step("comparison"):
         figs = {k: figures(e) for k, e in evs.items()}
         figs["nmpc (rig: friction 1.5x, mass +10 %)"] = figures(pert)
@@ -140,6 +148,29 @@ def _design(args, out: Path, done: list) -> int:
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=rp.json_default))
     print(f"best: {best}; report: {out / 'report.html'}")
     return 0
+
+
+def _seed_section(seeds: dict) -> "rp.Section":
+    """The NMPC's precision figures for each sensor-noise realisation."""
+    rows = []
+    for seed, ev in seeds.items():
+        f = figures(ev)
+        rows.append([seed, f["steady_state_worst"] * 1e3, f["steady_state_median"] * 1e3,
+                     f["overshoot_pct"], f["sine_worst"] * 1e3,
+                     "yes" if f["limit_cycle_free"] else "NO", "pass" if f["passed"] else "FAIL"])
+    return rp.Section("NMPC: other sensor-noise realisations", [
+        rp.Paragraph("The same NMPC on the same rig, with the position quantiser and the "
+                     "pressure noise drawn from other seeds. The figures scatter because the "
+                     "outcome of each stop depends on stick-slip events: the hold lock closes "
+                     "the valve only when a stop lands within half a quantum, and a stuck "
+                     "piston that breaks away moves 0.3-1 mm (the static friction's excess "
+                     "over the Coulomb level is released at once). A design is judged by its "
+                     "worst seed, not by seed 0."),
+        rp.Table(["seed", "steady state worst", "steady state median", "overshoot",
+                  "sine worst", "no limit cycle", "precision spec"], rows,
+                 units=["", "mm", "mm", "%", "mm", "", ""],
+                 caption="NMPC per sensor-noise seed (12-bit x, noisy p, no v)"),
+    ])
 
 
 if __name__ == "__main__":

@@ -65,6 +65,22 @@ def node_reference(pb, r: float, r_prev: float | None, t: float) -> tuple[np.nda
     return R, np.clip(VR, -vmax, vmax)
 
 
+def admissible(pb, R: np.ndarray, VR: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The node reference projected onto the stroke the NMPC may use (m, m/s).
+
+    A reference beyond ``stroke_margin`` cannot be reached: tracking it makes the
+    stroke limit's exact (L1) penalty active, and the optimum sits on the kink where
+    the tracking cost's pull balances the penalty's multiplier. Any model error (the
+    lines' delay) then moves the plan from one side of the kink to the other every
+    sample: the command chattered by +-0.5 V and p_b by +-1 bar at the margin. The
+    projected reference is reachable, the constraint inactive, the cost smooth there;
+    where it is clipped its velocity is zero.
+    """
+    lo, hi = pb.c.stroke_margin, pb.L - pb.c.stroke_margin
+    clipped = (R < lo) | (R > hi)
+    return np.clip(R, lo, hi), np.where(clipped, 0.0, VR)
+
+
 def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     """One controller update: the new memory (its U[0] is the command).
 
@@ -83,6 +99,7 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
         raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
     t = 0.0 if state is None else state.t + pb.T
     R, VR = node_reference(pb, r, None if state is None else state.r_prev, t)
+    R, VR = admissible(pb, R, VR)
     R, VR = (R / pb.L)[None, :], (VR / V_SCALE)[None, :]
     if state is None:
         s = _Sample(zm, R, VR, 0.0, zm)
