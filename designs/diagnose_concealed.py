@@ -293,22 +293,25 @@ def sets_section(rows: list[dict]) -> tuple[rp.Section, bool, str]:
     ok = [r for r in rows if r.get("correct")]
     table = []
     for r in rows:
-        err = ", ".join(f"{k.split('.', 1)[1]} {100 * e:+.0f} %"
+        err = ", ".join(f"{k.split('.', 1)[1]} {round(100 * e) + 0:+d} %"
                         for k, e in r.get("relative_errors", {}).items())
         fb, fa, fl = (r.get(k, {}) or {} for k in ("fit_before", "fit_after", "noise_floor"))
-        fits = " / ".join(f"{_f(fb.get(s))} -> {_f(fa.get(s))} ({_f(fl.get(s))})"
-                          for s in ("x", "p_a", "p_b") if s in fb)
+        fits = [f"{_f(fb.get(s))} -> {_f(fa.get(s))} ({_f(fl.get(s))})" if s in fb else "-"
+                for s in ("x", "p_a", "p_b")]
+        if "error" in r:
+            fits = [r["error"], "", ""]
         table.append([r["case"], r["label"], ", ".join(r["named"]), bool(r.get("correct")),
-                      err or "-", fits or r.get("error", "-"), r.get("candidate_models"),
-                      round(float(r["wall_s"]), 1)])
+                      err or "-", *fits, r.get("candidate_models"),
+                      f"{float(r['wall_s']):.1f}"])
     tab = rp.Table(["#", "concealed", "effects named", "correct", "value error",
-                    "fit x / p_a / p_b before -> after (noise floor)", "models", "wall"],
-                   table, units=["", "", "", "", "", "%", "", "s"],
+                    "fit x", "fit p_a", "fit p_b", "models", "wall"],
+                   table, units=["", "", "", "", "", "%", "%", "%", "", "s"],
                    caption="Sets of effects, wrong nominal values (mass +8 %, viscous "
                            "friction -7 %, valve conductance +6 %, supply -5 %), position "
                            "only and open loop: effects named (parameter_error not listed) "
                            "vs concealed; relative error of each concealed value in "
-                           "plant.augmented.toml; fit and noise floor per signal")
+                           "plant.augmented.toml; fit per signal before -> after (noise "
+                           "floor: the fit a perfect model reaches)")
     concealed = sorted({e for r in rows for e in r["concealed"]})
     named_cols = concealed + ["none", "error"]
     conf = [[e] + [sum(1 for r in rows if e in r["concealed"] and c in r["named"])

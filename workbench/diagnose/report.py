@@ -128,9 +128,10 @@ def _remaining_section(d) -> rp.Section:
     if not d.remaining:
         return rp.Section("What remains", [rp.Paragraph("No replay to compare.")])
     regimes = [k for k in next(iter(d.remaining.values())) if k not in ("fit", "floor", "ratio")]
-    rows = [[s, round(r["fit"], 1), r["floor"], round(r["ratio"], 1)]
-            + [None if r.get(g) is None else round(r[g], 1) for g in regimes]
-            for s, r in d.remaining.items()]
+    def one(v):                         # one decimal in every column ("3.0", not "3")
+        return "n/a" if v is None or not np.isfinite(v) else f"{v:.1f}"
+    rows = [[s, one(r["fit"]), one(r["floor"]), one(r["ratio"])]
+            + [one(r.get(g)) for g in regimes] for s, r in d.remaining.items()]
     blocks = [rp.Table(["signal", "fit", "noise floor", "error / noise"] + regimes, rows,
                        units=["", "%", "%", "-"] + ["-"] * len(regimes),
                        caption="The replay of the final model against the noise floor (the fit "

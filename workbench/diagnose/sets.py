@@ -3,10 +3,12 @@ refitted jointly and compared on one footing.
 
 A rig rarely has one missing effect. After every candidate was refitted alone
 (:mod:`.explain`), pairs are refitted **jointly** (all their values free at once,
-started from the single fits): the best single with every other candidate (a weak
-second effect may rank low alone, behind proxies of the first) and every pair of the
-most promising ones (:data:`POOL`); then triples: the best pair with each of those
-and of the members of the next best pairs. Like the singles, every set is first
+started from the single fits): the best single with every other candidate that
+explains anything alone (dBIC > 0; a weak second effect may rank low alone, behind
+proxies of the first) and every pair of the
+most promising ones (:data:`POOL`); then, when the best pair's members both earn
+their place (below), triples: that pair with each of those and of the members of the
+next best pairs. Like the singles, every set is first
 refitted briefly (:data:`~.explain.SCREEN_NFEV` iterations) and only the best
 (:data:`FULL_SETS` pairs, one triple) fully. Every set ``S`` -- the nominal
 model, singles, pairs, triples -- is scored by the same Bayesian information
@@ -54,7 +56,7 @@ __all__ = ["Combined", "combine", "SetScore", "search", "by_member", "trade_offs
 #: Candidates combined into pairs and triples (the best singles by information criterion).
 POOL = 4
 #: Pairs refitted fully after their screening refit (the best by BIC; then the best triple).
-FULL_SETS = 3
+FULL_SETS = 2
 #: Smallest short-horizon cost a member must remove, in noise units: one signal's noise
 #: variance (the cost is the mean squared residual over the noise, summed over signals).
 MIN_REMOVED = 1.0
@@ -162,17 +164,21 @@ def search(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked]
         scores[(r.name,)] = SetScore((r.name,), r.result, r.result.cost, r.result.k,
                                      _bic(r.result.cost, r.result.k, n), r.result.seg_cost)
     evaluated = len(single)
-    # pairs: the best single with every other candidate (a weak second effect may rank
-    # low alone, behind the first one's proxies), and every pair of the pool
+    # pairs: the best single with every other candidate that explains anything alone
+    # (dBIC > 0; a weak second effect may rank low alone, behind the first one's
+    # proxies), and every pair of the pool
     anchor = pool[0].name if pool else None
     pairs = {tuple(sorted(p)) for p in itertools.combinations([r.name for r in pool], 2)}
-    pairs |= {tuple(sorted((anchor, o))) for o in single if anchor and o != anchor}
+    pairs |= {tuple(sorted((anchor, o))) for o, r in single.items()
+              if anchor and o != anchor and r.dbic > 0}
     pairs = {p for p in pairs if combine([by[a] for a in p]) is not None}
     evaluated += _fit_sets(refits, by, sorted(pairs), single, scores, SCREEN_NFEV, n)
     _refine(refits, by, scores, 2, FULL_SETS, max_nfev, n)
     best_pairs = sorted((s for k, s in scores.items() if len(k) == 2), key=lambda s: s.bic)
     triples: set[tuple[str, ...]] = set()
-    if best_pairs and best_pairs[0].bic < min(scores[(a,)].bic for a in best_pairs[0].names) \
+    # a third member is looked for only around a pair whose two members both earn their
+    # place (no two-effect explanation: no three-effect one is searched)
+    if best_pairs and all(_earns(scores[(b,)], best_pairs[0]) for b in best_pairs[0].names) \
             and not out_of_time():
         bp = best_pairs[0].names
         thirds = {r.name for r in pool} | {m for s in best_pairs[1:4] for m in s.names}
