@@ -24,6 +24,8 @@ import casadi as ca
 import numpy as np
 
 from ..controllers.mpc import horizon_reference
+from ..controllers.mpc.model import V_SCALE
+from ..controllers.mpc.update import admissible
 from ..integrate.jit import compiled
 
 __all__ = ["PlainRTI", "ipopt_gauss_newton", "do_mpc_recommended", "osqp_unavailable"]
@@ -52,8 +54,11 @@ class _Shifted:
     def params(self, r: float, r_prev, y: dict) -> np.ndarray:
         pb = self.pb
         z = np.array([y["x"], y["v"], y["p_a"], y["p_b"]]) / pb.sx
-        _, rate = horizon_reference(r, r_prev, pb.T, 1, self.nmpc.reference_rate_limit)
-        return np.concatenate([z, [r / pb.L, rate / pb.L, self.u_prev, 0.0], pb.P]), z
+        # the NLP's parameters: (x0, R at the N + 1 nodes, their velocity, u_prev, d, P),
+        # the node reference made as the NMPC makes it (same extrapolation, same stroke)
+        R, rate = horizon_reference(r, r_prev, pb.T, self.N, self.nmpc.reference_rate_limit)
+        R, VR = admissible(pb, np.asarray(R, dtype=float).ravel(), np.full(self.N + 1, rate))
+        return np.concatenate([z, R / pb.L, VR / V_SCALE, [self.u_prev, 0.0], pb.P]), z
 
     def guess(self, w, z):
         if w is None:                     # at rest at the measured state, command centred
