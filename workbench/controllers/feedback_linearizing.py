@@ -220,7 +220,9 @@ def _design_pressures(model: DriveModel, plant, x: float) -> tuple[float, float]
         from ..linearize import operating_point
         op = operating_point(plant, x)
         return float(op.p_a), float(op.p_b)
-    except Exception:   # noqa: BLE001 - fall back to the valve's balance pressure
+    except Exception as exc:   # noqa: BLE001 - fall back to the valve's balance pressure
+        from ..output import reraise_interrupt
+        reraise_interrupt(exc)             # a Ctrl-C polled by CasADi is a stop
         p = model.balance_pressure()
         return p, p
 

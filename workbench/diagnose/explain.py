@@ -77,6 +77,8 @@ def _work(i: int) -> FitResult:
                              max_nfev=j["max_nfev"], jit=j["jit"], base=j["base"],
                              start=j["starts"].get(cand.name))
     except Exception as exc:  # noqa: BLE001 - one failing candidate must not stop the rest
+        from ..output import reraise_interrupt
+        reraise_interrupt(exc)          # a Ctrl-C polled by CasADi is a stop, not a failed fit
         return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values={}, std={}, ci95={},
                          cost=float("inf"), signal_costs={}, seg_cost=None, grid=[], fits={},
                          plant_values={}, error=f"{type(exc).__name__}: {exc}")

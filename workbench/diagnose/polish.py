@@ -117,7 +117,9 @@ def polish(prep: Prepared, base: PlantParams, cand: Candidate, values: Mapping[s
     plant = Plant(base.replace(**pv))
     try:
         res = estimate(plant, recs, keys, bounds=bounds or None, replay="open", max_iter=max_iter)
-    except Exception:  # noqa: BLE001 - a polish is optional; the refit's values stand
+    except Exception as exc:  # noqa: BLE001 - a polish is optional; the refit's values stand
+        from ..output import reraise_interrupt
+        reraise_interrupt(exc)          # a Ctrl-C polled by CasADi is a stop, not a failed polish
         return None
     if not np.all(np.isfinite(res.values_)) or res.poor_fit:
         return None

@@ -115,13 +115,15 @@ def _fmt_float(x: float, digits: int) -> str:
         return "0"
     # Round to the significant digits first, then choose the notation on the
     # rounded value (so 99999.7 becomes 100e3, not 100000).
-    x = float(f"{x:.{digits - 1}e}")
-    exp10 = math.floor(math.log10(abs(x)))
+    # (decimal exponent and mantissa read from the text, not from log10 and a division:
+    # exact for subnormal numbers, where 10.0 ** eng underflows to 0)
+    mant_text, exp_text = f"{x:.{digits - 1}e}".split("e")
+    x, exp10 = float(f"{x:.{digits - 1}e}"), int(exp_text)
     if -3 <= exp10 < 5:
         decimals = max(digits - 1 - exp10, 0)
         return _strip(f"{x:.{decimals}f}")
     eng = 3 * math.floor(exp10 / 3)
-    mant = x / 10.0 ** eng
+    mant = float(mant_text) * 10 ** (exp10 - eng)
     decimals = max(digits - 1 - (exp10 - eng), 0)
     return f"{_strip(f'{mant:.{decimals}f}')}e{eng}"
 
