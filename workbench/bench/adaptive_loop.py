@@ -24,7 +24,7 @@ from ..integrate import adaptive
 from ..integrate import jit as jit_cache
 from ..plant import Plant
 from ..simulate import Trajectory, _initial, _outputs, _units
-from .compiled_loop import _CFLAGS, _CFLAGS_FALLBACK, _NC, _pid_kernel
+from .compiled_loop import _CFLAGS, _CFLAGS_FALLBACK, _NC, _pid_kernel, outputs_c, work_c
 
 __all__ = ["AdaptiveLoop", "DEFAULT_TOLERANCE"]
 
@@ -172,33 +172,7 @@ _DRIVER_C = r"""
 #define WB_FAC_MAX %(fac_max)r
 #define WB_MAX_STEPS %(max_steps)d
 
-typedef struct {
-  const casadi_real** arg;
-  casadi_real** res;
-  casadi_int* iw;
-  casadi_real* w;
-} wb_work;
-
-static void wb_grow(casadi_int* mx, casadi_int v) { if (v > *mx) *mx = v; }
-
-static int wb_alloc(wb_work* m) {
-  casadi_int na, nr, ni, nw, ma = 3, mr = 2, mi = 1, mw = 1;
-  wb_ctrl_work(&na, &nr, &ni, &nw);
-  wb_grow(&ma, na); wb_grow(&mr, nr); wb_grow(&mi, ni); wb_grow(&mw, nw);
-  wb_astep_work(&na, &nr, &ni, &nw);
-  wb_grow(&ma, na); wb_grow(&mr, nr); wb_grow(&mi, ni); wb_grow(&mw, nw);
-  wb_out_work(&na, &nr, &ni, &nw);
-  wb_grow(&ma, na); wb_grow(&mr, nr); wb_grow(&mi, ni); wb_grow(&mw, nw);
-  m->arg = (const casadi_real**) malloc(sizeof(casadi_real*) * ma);
-  m->res = (casadi_real**) malloc(sizeof(casadi_real*) * mr);
-  m->iw = (casadi_int*) malloc(sizeof(casadi_int) * mi);
-  m->w = (casadi_real*) malloc(sizeof(casadi_real) * mw);
-  return !m->arg || !m->res || !m->iw || !m->w;
-}
-
-static void wb_free(wb_work* m) {
-  free((void*) m->arg); free(m->res); free(m->iw); free(m->w);
-}
+%(work)s
 %(advance)s
 /* n periods of length T from [x; controller state] xc0, references r[0..n-1]; states
    at the period ends to traj (n x WB_NX), commands to u_out, final [x; c] to xc_end,
@@ -229,19 +203,7 @@ CASADI_SYMBOL_EXPORT int wb_aloop(casadi_int n, const casadi_real* xc0, const ca
   return flag;
 }
 
-CASADI_SYMBOL_EXPORT int wb_aoutputs(casadi_int n, const casadi_real* x, const casadi_real* u,
-                                     casadi_real* y) {
-  casadi_int k;
-  wb_work m;
-  int flag = wb_alloc(&m) ? 2 : 0;
-  for (k = 0; k < n && !flag; ++k) {
-    m.arg[0] = x + k * WB_NX; m.arg[1] = u + k; m.res[0] = y + k * WB_NY;
-    if (wb_out(m.arg, m.res, m.iw, m.w, 0)) flag = 1;
-  }
-  wb_free(&m);
-  return flag;
-}
-"""
+%(outputs)s"""
 
 
 class _NativeAdaptive:
@@ -271,7 +233,8 @@ class _NativeAdaptive:
         src = cg.dump() + _DRIVER_C % {
             "nx": nx, "nc": _NC, "ny": ny, "safety": adaptive.SAFETY,
             "fac_min": adaptive.FAC_MIN, "fac_max": adaptive.FAC_MAX,
-            "max_steps": adaptive.MAX_STEPS, "advance": adaptive.ADVANCE_C}
+            "max_steps": adaptive.MAX_STEPS, "advance": adaptive.ADVANCE_C,
+            "work": work_c("astep"), "outputs": outputs_c("wb_aoutputs")}
         try:
             so, cached = jit_cache.shared_library("wb_aloop", src, (_CFLAGS, _CFLAGS_FALLBACK))
         except jit_cache.CompileError as exc:

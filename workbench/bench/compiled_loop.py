@@ -229,17 +229,18 @@ class _NativeUnavailable(Exception):
     """No C compiler, or the loop did not compile."""
 
 
-_DRIVER_C = r"""
-#include <stdlib.h>
+def work_c(step: str) -> str:
+    """C of the work buffers shared by ``wb_ctrl``, ``wb_<step>`` and ``wb_out`` (one
+    allocation sized for the largest), used by the compiled loops of this package."""
+    return _WORK_C.replace("wb_step_work", f"wb_{step}_work")
 
-/* workbench.bench.compiled_loop: n control periods, each wb_ctrl then WB_M x wb_step */
-#define WB_NX %(nx)d
-#define WB_NC %(nc)d
-#define WB_NZ %(nz)d
-#define WB_NY %(ny)d
-#define WB_M %(m)d
 
-typedef struct {
+def outputs_c(name: str) -> str:
+    """C of ``name(n, x, u, y)``: the plant outputs y (n x WB_NY) for n rows of states."""
+    return _OUTPUTS_C.replace("wb_outputs", name)
+
+
+_WORK_C = r"""typedef struct {
   const casadi_real** arg;
   casadi_real** res;
   casadi_int* iw;
@@ -267,6 +268,35 @@ static void wb_free(wb_work* m) {
   free((void*) m->arg); free(m->res); free(m->iw); free(m->w);
 }
 
+"""
+
+_OUTPUTS_C = r"""/* The plant outputs y (n x WB_NY) for rows of states x (n x WB_NX) and commands u. */
+CASADI_SYMBOL_EXPORT int wb_outputs(casadi_int n, const casadi_real* x, const casadi_real* u,
+                                    casadi_real* y) {
+  casadi_int k;
+  wb_work m;
+  int flag = wb_alloc(&m) ? 2 : 0;
+  for (k = 0; k < n && !flag; ++k) {
+    m.arg[0] = x + k * WB_NX; m.arg[1] = u + k; m.res[0] = y + k * WB_NY;
+    if (wb_out(m.arg, m.res, m.iw, m.w, 0)) flag = 1;
+  }
+  wb_free(&m);
+  return flag;
+}
+"""
+
+
+_DRIVER_C = r"""
+#include <stdlib.h>
+
+/* workbench.bench.compiled_loop: n control periods, each wb_ctrl then WB_M x wb_step */
+#define WB_NX %(nx)d
+#define WB_NC %(nc)d
+#define WB_NZ %(nz)d
+#define WB_NY %(ny)d
+#define WB_M %(m)d
+
+%(work)s
 /* Runs n periods from [x; controller state] xc0 with references r[0..n-1]. Writes the
    states after every substep (every != 0, n * WB_M rows) or every period (n rows) to
    traj, the commands to u_out and the final [x; controller state] to xc_end. */
@@ -302,20 +332,7 @@ CASADI_SYMBOL_EXPORT int wb_loop(casadi_int n, const casadi_real* xc0, const cas
   return flag;
 }
 
-/* The plant outputs y (n x WB_NY) for rows of states x (n x WB_NX) and commands u. */
-CASADI_SYMBOL_EXPORT int wb_outputs(casadi_int n, const casadi_real* x, const casadi_real* u,
-                                    casadi_real* y) {
-  casadi_int k;
-  wb_work m;
-  int flag = wb_alloc(&m) ? 2 : 0;
-  for (k = 0; k < n && !flag; ++k) {
-    m.arg[0] = x + k * WB_NX; m.arg[1] = u + k; m.res[0] = y + k * WB_NY;
-    if (wb_out(m.arg, m.res, m.iw, m.w, 0)) flag = 1;
-  }
-  wb_free(&m);
-  return flag;
-}
-"""
+%(outputs)s"""
 
 
 #: compiler flags of the C loop. C89 makes CasADi's fmin/fmax plain comparisons instead
@@ -354,7 +371,8 @@ class _NativeLoop:
         for fn in (ctrl, kernel, out):
             cg.add(fn)
         nx, nz, ny = kernel.size1_in(0), kernel.size1_in(2), out.size1_out(0)
-        src = cg.dump() + _DRIVER_C % {"nx": nx, "nc": _NC, "nz": nz, "ny": ny, "m": substeps}
+        src = cg.dump() + _DRIVER_C % {"nx": nx, "nc": _NC, "nz": nz, "ny": ny, "m": substeps,
+                                  "work": work_c("step"), "outputs": outputs_c("wb_outputs")}
         try:
             so, cached = jit_cache.shared_library("wb_loop", src, (_CFLAGS, _CFLAGS_FALLBACK))
         except jit_cache.CompileError as exc:
