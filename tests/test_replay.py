@@ -94,3 +94,18 @@ def test_fallback_and_bad_options(plant, rec):
     with pytest.raises(InputError, match="replay mode"):
         rp.is_closed(plant, rec, "sometimes")
     assert rp.is_closed(plant, rec, "auto") and not rp.is_closed(plant, rec, "open")
+
+
+@pytest.mark.parametrize("scale, hint", [(1e3, "mm"), (2.4, "stroke"), (1.0, None)])
+def test_library_replay_checks_the_recording_against_the_plant(plant, scale, hint):
+    # issue 15: the CLI checked recordings, the library entry point did not -- a position
+    # in mm (x = 250 on a 0.5 m stroke) was clipped to the stroke and replayed silently
+    t = np.arange(0.0, 0.2, 0.01)
+    x = np.full_like(t, 0.25) * scale
+    rec = Recording.from_arrays(t, u=np.full_like(t, plant.params["valve.command_center"]),
+                                x=x)
+    if hint is None:                                   # SI: replays
+        assert rp.replay(plant, rec, mode="open", progress=False).recording.has("x")
+        return
+    with pytest.raises(InputError, match=hint):
+        rp.replay(plant, rec, mode="open", progress=False)

@@ -312,8 +312,12 @@ def replay(plant, recording, mode: str = "auto", progress: bool | None = None) -
     ------
     InputError
         A closed-loop replay asked for without an ``r`` column or a ``[controller]``,
-        or an unknown ``mode``.
+        or an unknown ``mode``; a recording that is implausible on its own or for this
+        plant (:meth:`~workbench.recording.Recording.check`: time in ms, x outside the
+        stroke, u outside the valve's range, ...), before anything is simulated.
     """
+    if hasattr(recording, "check"):
+        recording.check(plant)
     strategy = ClosedLoop() if is_closed(plant, recording, mode) else OpenLoop()
     traj = run(plant, recording, strategy, progress=progress)
     return Replay(trajectory=traj, recording=_as_recording(traj, recording),
