@@ -637,3 +637,34 @@ def test_wall_time_is_the_estimates_own(noisy_run):
     w = json.loads(json.dumps(res.to_dict()))["wall_time_s"]
     assert isinstance(w, float) and 0.0 < w <= cap["outer_wall_s"]
     assert w >= 0.8 * cap["outer_wall_s"]
+
+
+def test_a_controller_that_did_not_run_is_named_not_the_replay(truth_plant):
+    # issue 15: greybox blamed "closed-loop replay drifts" where the cause was a plant file
+    # whose [controller] is not the loop in the recording (diagnose said so). The recorded
+    # command is made by the plant's own PID (agreement ~100 %) and by one with kp x 3.
+    from types import SimpleNamespace
+
+    from workbench import controllers, replay, simulate
+    from workbench.identify.grey_box.verdict import _verdict
+    ref = simulate.steps([0.15, 0.35, 0.2], hold=0.5)
+    t = np.arange(1501) * 1e-3
+    own = controllers.from_plant(truth_plant)
+    other = controllers.PID(kp=3.0 * own.kp, kd=own.kd, ki=own.ki, sample_time=own.sample_time,
+                            u_center=own.u_center, u_min=own.u_min, u_max=own.u_max)
+    agreement = {}
+    for name, ctrl in (("own", own), ("other", other)):
+        run = simulate.closed_loop(truth_plant, ctrl, ref, t_end=1.5, x0=0.25,
+                                   output_times=t, progress=False)
+        rec = Recording.from_arrays(t, u=run["u"], r=run.reference, x=run["x"])
+        agreement[name] = replay.command_agreement(truth_plant, rec)
+    assert agreement["own"] > 99.0                     # the same law on the same samples
+    assert agreement["other"] < replay.CONTROLLER_AGREEMENT
+    data = [SimpleNamespace(source="rec.csv", noise={"x": 1e-5})]
+    args = dict(fit_ms=[{"x": 99.0}], modes=["closed_loop"], res_rms=[{"x": 1e-5}],
+                white=[{"x": 0.0}], int_err=[{"x": 0.0}], threshold=90.0, success=True,
+                status="", params=[], identifiable=[], at_bound=[], corr=np.zeros((0, 0)))
+    _, msgs = _verdict(data, [{"x": 40.0}], agreement=[agreement["other"]], **args)
+    assert any("does not reproduce the recorded command" in m for m in msgs), msgs
+    _, msgs = _verdict(data, [{"x": 40.0}], agreement=[agreement["own"]], **args)
+    assert not any("does not reproduce" in m for m in msgs) and any("drifts" in m for m in msgs)

@@ -47,7 +47,12 @@ from .errors import InputError, WorkbenchError
 from .output import reraise_interrupt, stop_on_signals
 
 __all__ = ["Replay", "replay", "run", "initial_state", "is_closed", "ClosedLoop", "OpenLoop",
-           "Fallback", "Strategy", "SIMULATED_COLUMNS"]
+           "Fallback", "Strategy", "SIMULATED_COLUMNS", "command_agreement",
+           "controller_agreement", "controller_phase", "CONTROLLER_AGREEMENT"]
+
+#: %: fit of the recorded command by the plant file's controller below which that
+#: controller is taken not to be the loop that ran (see :func:`command_agreement`).
+CONTROLLER_AGREEMENT = 90.0
 
 #: Columns of a recording that the simulation replaces; the others ("r", unknown
 #: columns) are copied from the recording.
@@ -340,3 +345,54 @@ def _as_recording(run, rec):
     data["t"] = rec.t
     return Recording(columns=tuple(rec.columns), data=data, metadata=meta,
                      source="<simulation>")
+
+
+def controller_phase(u: np.ndarray, ratio: int) -> tuple[int, float]:
+    """Phase (sample index mod ratio) at which u changes, and the share of changes there."""
+    changes = np.flatnonzero(np.abs(np.diff(u)) > 1e-12) + 1
+    if len(changes) == 0 or ratio <= 1:
+        return 0, 1.0
+    counts = np.bincount(changes % ratio, minlength=ratio)
+    ph = int(np.argmax(counts))
+    return ph, float(counts[ph] / counts.sum())
+
+
+def controller_agreement(plant, controller: Any, rec, x: np.ndarray,
+                         phase: int, ratio: int) -> float:
+    """Fit (%) of the recorded command by the plant file's controller at its instants."""
+    idx = np.arange(len(x))[phase::ratio]
+    state = controller.reset()
+    u_pred = np.empty(len(idx))
+    r_rec = np.asarray(rec["r"])
+    for j, i in enumerate(idx):
+        state, u_pred[j] = controller.update(state, float(r_rec[i]), {"x": float(x[i])})
+    u_pred = np.clip(u_pred, plant.params["valve.command_min"],
+                     plant.params["valve.command_max"])
+    u_rec = np.asarray(rec["u"])[idx]
+    from .signals import fit
+    return fit(u_rec, u_pred) if np.ptp(u_rec) > 0 else 100.0
+
+def command_agreement(plant, rec) -> float | None:
+    """Fit (%) of the recorded command ``u`` by the plant file's ``[controller]`` run on
+    the recorded ``r`` and ``x`` at its own update instants (the phase at which ``u``
+    changes); None when that cannot be judged (no ``[controller]``, no ``r``, ``u`` or
+    ``x``, or a controller period that is not a multiple of the sample time).
+
+    A low value (diagnose uses 90 %) says the plant file's controller is not the loop
+    that ran (a delay, other gains, a filter): a closed-loop replay then drifts for
+    that reason, not because of the plant model.
+    """
+    if not plant.params.has_controller or not all(c in rec for c in ("r", "u", "x")):
+        return None
+    from .controllers import from_plant
+    controller = from_plant(plant)
+    t = np.asarray(rec["t"], dtype=float)
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    if dt <= 0.0:
+        return None
+    ratio = int(round(controller.sample_time / dt))
+    if ratio < 1 or abs(ratio * dt - controller.sample_time) > 0.02 * dt:
+        return None
+    phase, _share = controller_phase(np.asarray(rec["u"], dtype=float), ratio)
+    return controller_agreement(plant, controller, rec, np.asarray(rec["x"], dtype=float),
+                                phase, ratio)

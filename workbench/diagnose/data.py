@@ -20,6 +20,9 @@ import numpy as np
 from ..errors import InputError
 from ..plant import Plant
 from ..recording import Recording
+from ..replay import CONTROLLER_AGREEMENT  # % below which the replay is open loop
+from ..replay import controller_agreement as _controller_agreement
+from ..replay import controller_phase as _controller_phase
 from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
 
 __all__ = ["Prepared", "prepare", "uniform", "recorded_supply", "MIN_DURATION",
@@ -33,10 +36,6 @@ SHORT_DURATION = 8.0
 WINDOW_X = 0.031
 #: s: Savitzky-Golay window for the pressure rates.
 WINDOW_P = 0.011
-#: %: fit of the recorded command by the plant file's controller (at its sample
-#: instants, from the recorded r and x) below which the controller is taken not to be
-#: the loop that ran (a delay, other gains, a filter) and the replay is open loop.
-CONTROLLER_AGREEMENT = 90.0
 #: s: long Savitzky-Golay window for the slow pressure rates (leaks, heat exchange).
 WINDOW_SLOW = 0.101
 
@@ -127,16 +126,6 @@ class Prepared:
         return e[prev]
 
 
-def _controller_phase(u: np.ndarray, ratio: int) -> tuple[int, float]:
-    """Phase (sample index mod ratio) at which u changes, and the share of changes there."""
-    changes = np.flatnonzero(np.abs(np.diff(u)) > 1e-12) + 1
-    if len(changes) == 0 or ratio <= 1:
-        return 0, 1.0
-    counts = np.bincount(changes % ratio, minlength=ratio)
-    ph = int(np.argmax(counts))
-    return ph, float(counts[ph] / counts.sum())
-
-
 def _plant_controller(plant: Plant, rec: Recording, dt: float,
                       notes: list[str]) -> tuple[Any, int, int]:
     """The plant file's controller (None without one, or when its period is not a
@@ -172,21 +161,6 @@ def _smoothed(rec: Recording, x: np.ndarray, dt: float, win_x: int, win_p: int,
             out[f"dp{short}"] = derivative(p, dt, 2, win_p)
             out["noise"][name] = noise_floor(p)
     return out
-
-
-def _controller_agreement(plant: Plant, controller: Any, rec: Recording, x: np.ndarray,
-                          phase: int, ratio: int) -> float:
-    """Fit (%) of the recorded command by the plant file's controller at its instants."""
-    idx = np.arange(len(x))[phase::ratio]
-    state = controller.reset()
-    u_pred = np.empty(len(idx))
-    r_rec = np.asarray(rec["r"])
-    for j, i in enumerate(idx):
-        state, u_pred[j] = controller.update(state, float(r_rec[i]), {"x": float(x[i])})
-    u_pred = np.clip(u_pred, plant.params["valve.command_min"],
-                     plant.params["valve.command_max"])
-    u_rec = np.asarray(rec["u"])[idx]
-    return fit(u_rec, u_pred) if np.ptp(u_rec) > 0 else 100.0
 
 
 #: Recorded columns held (zero-order) when resampling: the command and reference are

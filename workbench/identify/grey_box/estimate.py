@@ -197,7 +197,7 @@ def estimate(plant: Plant, recordings: Sequence[Recording | str | os.PathLike],
     ci = np.column_stack([values - _Z95 * std, values + _Z95 * std])
     poor, msgs = _verdict(data, chk.fit_after, chk.fit_ms, chk.modes, res_rms, white,
                           chk.int_err, fit_threshold, sol.success, sol.status, params,
-                          identifiable, at_bound, corr)
+                          identifiable, at_bound, corr, agreement=chk.agreement)
     method_info = {
         "method": method, "integrator": integrator, "substeps": int(substeps),
         "newton_iterations": int(newton_iterations),
@@ -420,6 +420,8 @@ class _Checks:
     int_err: list = field(default_factory=list)
     x0_hat: list = field(default_factory=list)
     modes: list = field(default_factory=list)
+    #: fit (%) of the recorded u by the plant file's controller (None: not judged)
+    agreement: list = field(default_factory=list)
 
 
 def _check_replays(plant: Plant, est_plant: Plant, model: Plant, prob: _Problem,
@@ -439,6 +441,7 @@ def _check_replays(plant: Plant, est_plant: Plant, model: Plant, prob: _Problem,
         out.x0_hat.append(xs)
         closed = _use_closed_loop(replay, d.rec, plant)
         out.modes.append("closed_loop" if closed else "open_loop")
+        out.agreement.append(_rp.command_agreement(plant, d.rec) if closed else None)
         runs = []
         for pl, xstart, fits in ((plant, xi, out.fit_before), (est_plant, xs, out.fit_after)):
             try:

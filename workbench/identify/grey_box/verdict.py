@@ -10,6 +10,7 @@ import numpy as np
 from ...errors import InputError
 from ...recording import fit as nrmse_fit
 from ...signals import autocorrelation, fraction_outside
+from ...replay import CONTROLLER_AGREEMENT
 
 
 _SIGNAL_UNITS = {"x": "m", "v": "m/s", "p_a": "Pa", "p_b": "Pa", "p_s": "Pa"}
@@ -35,7 +36,8 @@ def _fits(rec_y: Mapping[str, np.ndarray], run) -> dict[str, float]:
 
 
 def _verdict(data, fit_after, fit_ms, modes, res_rms, white, int_err, threshold, success,
-             status, params, identifiable, at_bound, corr) -> tuple[bool, list[str]]:
+             status, params, identifiable, at_bound, corr,
+             agreement=None) -> tuple[bool, list[str]]:
     """Poor fit: the estimated model cannot follow a recording.
 
     Either a signal's fit is below ``threshold`` both in the fresh CVODES replay and
@@ -47,7 +49,8 @@ def _verdict(data, fit_after, fit_ms, modes, res_rms, white, int_err, threshold,
     poor = False
     msgs: list[str] = []
     worst, drift = [], []
-    for d, fa, fm, mode in zip(data, fit_after, fit_ms, modes):
+    agreement = list(agreement) if agreement is not None else [None] * len(data)
+    for d, fa, fm, mode, agree in zip(data, fit_after, fit_ms, modes, agreement):
         where = "" if len(data) == 1 else f" ({d.source})"
         for s, fv in fa.items():
             bad_replay = not math.isfinite(fv) or fv < threshold
@@ -55,7 +58,7 @@ def _verdict(data, fit_after, fit_ms, modes, res_rms, white, int_err, threshold,
             if bad_replay and bad_model:
                 worst.append(f"{s} {fv:.1f} %{where}")
             elif bad_replay:
-                drift.append((s, fv, fm[s], mode, where))
+                drift.append((s, fv, fm[s], mode, where, agree))
     if worst:
         poor = True
         msgs.append(f"Fit after estimation below {threshold:g} %: {', '.join(worst)}; the model "
@@ -70,10 +73,16 @@ def _verdict(data, fit_after, fit_ms, modes, res_rms, white, int_err, threshold,
         poor = True
         msgs.append("Residuals are correlated and well above the measurement noise for "
                     f"{', '.join(systematic)}: a systematic model error remains.")
-    for s, fv, fm, mode, where in drift:
+    for s, fv, fm, mode, where, agree in drift:
         hint = ("" if mode == "closed_loop" else
                 "; open-loop replay of a position drive integrates every small difference "
                 "(give the recording's r and the plant's [controller] for a closed-loop check)")
+        if mode == "closed_loop" and agree is not None and agree < CONTROLLER_AGREEMENT:
+            hint = (f"; but the plant file's [controller] does not reproduce the recorded "
+                    f"command (fit of u {agree:.0f} %): it is probably not the loop that ran "
+                    "(a delay, other gains, a filter), so the closed-loop replay cannot be "
+                    "judged -- give the controller that ran, or replay open loop "
+                    "(--replay open)")
         msgs.append(f"The {mode.replace('_', '-')} replay of {s}{where} drifts (fit {fv:.1f} %) "
                     f"although the model follows it to {fm:.1f} % from the estimated initial "
                     f"state{hint}.")
