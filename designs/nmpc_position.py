@@ -355,7 +355,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "solve_time": stats, "validation_nmpc": v_n.to_dict(),
                    "validation_pd": v_p.to_dict(), "quick": quick}
         write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
-    print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
+    print(f"design {'PASS' if design_ok else 'FAIL'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
 

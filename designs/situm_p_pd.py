@@ -377,7 +377,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                    "arx_poles": [[float(z.real), float(z.imag)] for z in arx_poles],
                    "pct_poles": [[float(z.real), float(z.imag)] for z in pct_poles]}
         write_json(out / "summary.json", summary, indent=1, default=rp.json_default)
-    print(f"design {'PASSED' if design_ok else 'FAILED'}: {msg}")
+    print(f"design {'PASS' if design_ok else 'FAIL'}: {msg}")
     print(f"  report: {html}\n          {pdf}")
     return 0 if design_ok else 1
 

@@ -402,3 +402,20 @@ def test_odd_sizes_render(tmp_path):
     flat = re.sub(r"\s+", " ", " ".join(_pdf_pages_text(pdf_path)))
     assert "Table 1: tall rows" in flat and "Table 2" in flat
     assert "Figure 1: taller than the page" in flat and flat.count("line") == 75
+
+
+def test_a_unit_column_gives_one_format_per_quantity():
+    # A paper-results table lists a different quantity per row: 0.7 m/s must not become
+    # 7.000e-1 because a pressure of 6e5 Pa shares its column; rows of one unit still
+    # share one format (the dimensionless rows here: fixed decimals for all of them)
+    from workbench.report.columns import table_view
+    rows = [["Kv", 0.7, 0.63, "m/s"], ["p_s", 5e5, 6.013e5, "Pa"],
+            ["zeta", 1.1, 1.16, "-"], ["b1", 0.0125, 0.003883, "-"]]
+    texts = table_view(["result", "paper", "workbench", "unit"], None, rows).texts
+    assert texts[0][1:3] == ("0.7", "0.63") and texts[1][1:3] == ("500000", "601300")
+    dimless = [t[2] for t in texts if t[3] == "-"]
+    assert len({len(x.split(".")[1]) for x in dimless}) == 1      # one format
+    assert all(float(x) == pytest.approx(v, rel=1e-3) for x, v in zip(dimless, (1.16, 0.003883)))
+    # without a unit column (or with one unit) the whole column shares one format
+    one = table_view(["a", "unit"], None, [[0.00038778, "s"], [2.3634e-08, "s"]]).texts
+    assert [t[0] for t in one] == ["3.878e-4", "2.363e-8"]

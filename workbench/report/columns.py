@@ -211,11 +211,17 @@ def _column_kind(cells: list) -> str:
     return "text"
 
 
-def _column_texts(cells: list, digits: int) -> tuple[list[str], list[Any]]:
+def _column_texts(cells: list, digits: int,
+                  groups: Sequence[Any] | None = None) -> tuple[list[str], list[Any]]:
+    """Texts and values of one column; ``groups`` (one key per row, e.g. the row's
+    unit) gives one format per group instead of one for the whole column."""
     numbers_ = [number_text(c) for c in cells]
-    fmt = column_format([n[1] for n in numbers_ if n is not None], digits)
+    keys = list(groups) if groups is not None else [None] * len(cells)
+    fmts = {k: column_format([n[1] for n, kk in zip(numbers_, keys)
+                              if n is not None and kk == k], digits) for k in set(keys)}
     texts, values = [], []
-    for c, n in zip(cells, numbers_):
+    for c, n, k in zip(cells, numbers_, keys):
+        fmt = fmts[k]
         word = status_word(c)
         if word is not None:
             texts.append(word)
@@ -231,6 +237,21 @@ def _column_texts(cells: list, digits: int) -> tuple[list[str], list[Any]]:
             texts.append(str(c))
             values.append(c)
     return texts, values
+
+
+def _quantity_per_row(columns: Sequence[str], cols: list[list]) -> list[str] | None:
+    """The row's unit when the table has a ``unit`` column naming more than one unit.
+
+    Such a table lists a different quantity in each row (a paper's results: a
+    velocity, a pressure, a pole), so a number column holds several quantities: its
+    numbers share one format per quantity (rows of the same unit), not one for the
+    whole column, where a pressure of 6e5 Pa would force 0.7 m/s into 7.000e-1.
+    """
+    for j, name in enumerate(columns):
+        if str(name).strip().lower() in ("unit", "units"):
+            keys = ["" if is_empty(c) else str(c).strip() for c in cols[j]]
+            return keys if len(set(keys)) > 1 else None
+    return None
 
 
 def table_view(columns: Sequence[str], units: Sequence[str] | None, rows: Sequence[Sequence],
@@ -253,9 +274,10 @@ def table_view(columns: Sequence[str], units: Sequence[str] | None, rows: Sequen
                                            and all(_blank(c) for c in cols[j]))]
     keep = keep or list(range(ncol))
     kinds, texts, values = [], [], []
+    groups = _quantity_per_row(columns, cols)
     for j in keep:
         kinds.append(_column_kind(cols[j]))
-        t, v = _column_texts(cols[j], digits)
+        t, v = _column_texts(cols[j], digits, groups)
         texts.append(t)
         values.append(v)
     unit_row = None if units is None else tuple(keep_formulas(units[j]) for j in keep)
