@@ -36,7 +36,6 @@ Usage: python designs/paper_000.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -50,8 +49,6 @@ from workbench.identify.arx import fit_arx
 from workbench.identify.arx import validate as arx_validate
 from workbench.identify.excitation import aprbs, as_reference
 from workbench.identify.grey_box import estimate
-from workbench.errors import InputError
-from workbench.output import check_output_dir
 from workbench.params import atomic_write_text, json_safe
 from workbench.recording import Recording
 
@@ -336,16 +333,8 @@ def sweep(plant: Plant, setup: dict, changes: list[dict], quick: bool) -> list[d
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true",
-                    help="smoke mode: warm-started calibration, shorter runs, smaller sweeps")
-    ap.add_argument("--out", default=str(ROOT / "reports" / "paper_000"),
-                    help="output folder (default reports/paper_000)")
-    args = ap.parse_args(argv)
-    try:
-        out = check_output_dir(args.out)          # a bad --out is refused before any work
-    except InputError as exc:
-        ap.error(str(exc))
+    args, out = rp.design_arguments(__doc__.splitlines()[0], ROOT / "reports" / "paper_000",
+                                    "warm-started calibration, shorter runs, smaller sweeps", argv)
     t_start = time.perf_counter()
     return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 

@@ -25,7 +25,6 @@ Usage: python designs/paper_001.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -38,8 +37,6 @@ from workbench import Plant, controllers, linearize, plots, references, simulate
 from workbench import report as rp
 from workbench import validate
 from workbench.controllers.pd import pid_law
-from workbench.errors import InputError
-from workbench.output import check_output_dir
 from workbench.params import atomic_write_text, json_safe
 
 HERE = Path(__file__).resolve().parent
@@ -300,16 +297,8 @@ def fig_lines(steps: dict):
 
 # ---------------------------------------------------------------------- report
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true",
-                    help="smoke mode: coarser 10 m line, shorter staircase, one other tube bore")
-    ap.add_argument("--out", default=str(ROOT / "reports" / "paper_001"),
-                    help="output folder (default reports/paper_001)")
-    args = ap.parse_args(argv)
-    try:
-        out = check_output_dir(args.out)          # a bad --out is refused before any work
-    except InputError as exc:
-        ap.error(str(exc))
+    args, out = rp.design_arguments(__doc__.splitlines()[0], ROOT / "reports" / "paper_001",
+                                    "coarser 10 m line, shorter staircase, one other tube bore", argv)
     t_start = time.perf_counter()
     return rp.run_design(TITLE, out, PLANT, lambda done: _design(args, out, done, t_start))
 

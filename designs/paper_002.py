@@ -23,7 +23,6 @@ Usage: python designs/paper_002.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -173,18 +172,9 @@ def robustness(plant: Plant, quick: bool):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="shorter sweep and robustness run")
-    ap.add_argument("--out", default=str(ROOT / "reports" / "paper_002"), help="output folder")
-    args = ap.parse_args(argv)
-    from workbench.errors import InputError
-    from workbench.output import check_output_dir
-    try:
-        check_output_dir(args.out)                 # refused before any work
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    return rp.run_design(TITLE, args.out, PLANT, lambda done: _body(args, Path(args.out), done))
+    args, out = rp.design_arguments(__doc__.split("\n")[0], ROOT / "reports" / "paper_002",
+                                    "shorter sweep and robustness run", argv)
+    return rp.run_design(TITLE, out, PLANT, lambda done: _body(args, out, done))
 
 
 def _body(args, out: Path, done: list) -> int:

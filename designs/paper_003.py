@@ -27,7 +27,6 @@ Usage: python designs/paper_003.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -266,18 +265,9 @@ def _fmt(v):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="fewer fits and tank samples")
-    ap.add_argument("--out", default=str(ROOT / "reports" / "paper_003"), help="output folder")
-    args = ap.parse_args(argv)
-    from workbench.errors import InputError
-    from workbench.output import check_output_dir
-    try:
-        check_output_dir(args.out)                 # refused before any work
-    except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    return rp.run_design(TITLE, args.out, None, lambda done: _body(args, Path(args.out), done))
+    args, out = rp.design_arguments(__doc__.split("\n")[0], ROOT / "reports" / "paper_003",
+                                    "fewer fits and tank samples", argv)
+    return rp.run_design(TITLE, out, None, lambda done: _body(args, out, done))
 
 
 def _body(args, out: Path, done: list) -> int:

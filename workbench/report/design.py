@@ -16,7 +16,7 @@ from typing import Callable
 from .output import write_failure
 from .provenance import provenance
 
-__all__ = ["step", "run_design", "json_default"]
+__all__ = ["step", "run_design", "json_default", "design_arguments"]
 
 
 class step:
@@ -71,3 +71,32 @@ def json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
+
+
+def design_arguments(description: str, default_out: str | Path, quick_help: str,
+                     argv=None):
+    """The command line every design script shares: ``--quick`` and ``--out DIR``.
+
+    ``--out`` is validated before any work (:func:`workbench.output.check_output_dir`):
+    an empty name, a file, a path under a file or an unwritable folder ends the
+    program with exit 2 and one line naming it.
+
+    Returns
+    -------
+    (argparse.Namespace, pathlib.Path)
+        The parsed arguments and the output folder.
+    """
+    import argparse
+
+    from ..errors import InputError
+    from ..output import check_output_dir
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--quick", action="store_true", help=f"smoke mode: {quick_help}")
+    ap.add_argument("--out", default=str(default_out),
+                    help=f"output folder (default {default_out})")
+    args = ap.parse_args(argv)
+    try:
+        out = check_output_dir(args.out)          # a bad --out is refused before any work
+    except InputError as exc:
+        ap.error(str(exc))
+    return args, out
