@@ -81,8 +81,11 @@ def _what(r: Ranked, prep: Prepared) -> str:
         return (f"pressures overshoot in fast transients and relax afterwards, as gas "
                 f"heated by compression cools through the walls "
                 f"({v['gas.heat_transfer_coefficient']:.3g} W/K)")
-    key = name.split(":", 1)[1]
-    return f"{key} fits as {pv[key]:.4g} instead of the nominal {prep.plant.params[key]:.4g}"
+    nominal = prep.plant.params
+    return "; ".join(f"{k} fits as {v:.4g} instead of the nominal {nominal[k]:.4g} "
+                     f"({100 * (v / nominal[k] - 1):+.1f} %)" if nominal[k] else
+                     f"{k} fits as {v:.4g} instead of the nominal {nominal[k]:.4g}"
+                     for k, v in pv.items())
 
 
 def confidence(r: Ranked, runner_up: Ranked | None) -> float:

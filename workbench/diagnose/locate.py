@@ -45,6 +45,7 @@ EXPECTED: dict[str, tuple[str, ...]] = {
     "parameter_error:load.viscous_friction": ("moving",),
     "parameter_error:valve.sonic_conductance": ("high flow", "moving"),
     "parameter_error:supply.pressure": ("high flow",),
+    "parameter_error:nominal values": ("accelerating", "moving", "high flow"),
 }
 
 
