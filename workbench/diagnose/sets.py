@@ -33,7 +33,9 @@ nominal mismatch only it removes), also given as a share of what the others leav
 :data:`TRADE_OFF` are reported with the operating regimes that separate them, and
 *alternatives* -- other sets whose members all earn their place, within
 :data:`~.explain.DBIC_MIN` of the chosen one's BIC -- as explanations the recording
-cannot tell apart.
+cannot tell apart. Both come with the data that would separate them
+(:func:`tells_apart`): the operating regimes where the members only one side has
+show, and the share of this recording spent in them.
 """
 
 from __future__ import annotations
@@ -50,8 +52,8 @@ from .explain import DBIC_MIN, GAIN_MIN, SCREEN_NFEV, SEG_WORSE, Chosen, Ranked,
 from .locate import EXPECTED
 from .refit import FitResult
 
-__all__ = ["Combined", "combine", "SetScore", "search", "by_member", "trade_offs", "POOL",
-           "TRADE_OFF", "MIN_REMOVED"]
+__all__ = ["Combined", "combine", "SetScore", "search", "by_member", "trade_offs", "tells_apart",
+           "POOL", "TRADE_OFF", "MIN_REMOVED"]
 
 #: Candidates combined into pairs and triples (the best singles by information criterion).
 POOL = 4
@@ -69,14 +71,17 @@ class Combined(Candidate):
     """Several candidates fitted together (their values all free at once)."""
 
     members: tuple[Candidate, ...] = ()
+    nominal_point: Mapping[str, float] = field(default_factory=dict)
 
     def split(self, values: Mapping[str, float]) -> list[dict[str, float]]:
         """The fitted values of each member (candidate keys)."""
         return [{f.key: values[f.key] for f in m.free if f.key in values} for m in self.members]
 
     def grid_points(self) -> list[dict[str, float]]:
-        """Every member at its start value, then the scanned member's grid."""
-        return [{}] + (super().grid_points() if self.grid else [])
+        """Every member at its start value; the corrected nominal values back at the
+        plant file's (:func:`combine`); then the scanned member's grid."""
+        return [{}] + ([dict(self.nominal_point)] if self.nominal_point else []) \
+            + (super().grid_points() if self.grid else [])
 
     def plant_values(self, values: Mapping[str, float]) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -106,6 +111,12 @@ def combine(members: Sequence[Candidate], starts: Mapping[str, float] | None = N
     for m in members:
         fixed.update(m.fixed)
     starts = starts or {}
+    # a nominal value refitted alone may have drifted far to mimic another member's
+    # effect (measured: with a deadband, mass x3.6 and supply -40 %); the scan also
+    # tries the plant file's values, from which the joint refit reaches the small
+    # errors a plant file has
+    nominal_point = {f.key: f.start for m in members if m.effect == "parameter_error"
+                     for f in m.free if f.key in starts and len(members) > 1}
     free = tuple(replace(f, start=min(max(float(starts[f.key]), f.low), f.high))
                  if f.key in starts else f for m in members for f in m.free)
     grid: dict[str, list[float]] = {}
@@ -115,7 +126,8 @@ def combine(members: Sequence[Candidate], starts: Mapping[str, float] | None = N
                     effect="+".join(m.effect for m in members), free=free, fixed=fixed,
                     grid=grid,
                     needs_pressures=any(m.needs_pressures for m in members),
-                    describe=" and ".join(m.name for m in members), members=tuple(members))
+                    describe=" and ".join(m.name for m in members), members=tuple(members),
+                    nominal_point=nominal_point)
 
 
 @dataclass
@@ -201,11 +213,15 @@ def search(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked]
                       "every_member_earns_its_place": s.earns}
                      for s in sorted(scores.values(), key=lambda s: s.bic)],
             "chosen": list(best.names) if best else [],
-            "trade_offs": trade_offs(best, by) if best and best.result is not None else [],
-            "alternatives": [list(s.names) for s in scores.values()
-                             if best and s is not best and s.names and s.earns
-                             and s.bic - best.bic < DBIC_MIN],
+            "trade_offs": trade_offs(best, by, refits.masks)
+            if best and best.result is not None else [],
             "candidate_models": evaluated}
+    alts = [s for s in scores.values() if best and s is not best and s.names and s.earns
+            and s.bic - best.bic < DBIC_MIN]
+    info["alternatives"] = [list(s.names) for s in alts]
+    info["alternatives_tell_apart"] = [
+        {"set": list(s.names), "dbic": s.bic - best.bic,
+         "tells_apart": tells_apart(best.names, s.names, by, refits.masks)} for s in alts]
     return chosen, info
 
 
@@ -312,20 +328,46 @@ def by_member(joint: FitResult, members: Sequence[Candidate]) -> dict[str, dict[
     return {m.name: {f.key: joint.values[f.key] for f in m.free} for m in members}
 
 
-def trade_offs(best: SetScore, by: Mapping[str, Candidate]) -> list[dict[str, Any]]:
+def _shows(name: str, by: Mapping[str, Candidate], masks: Mapping[str, np.ndarray]) -> str:
+    """Where candidate ``name``'s signature shows (:data:`.locate.EXPECTED`) and the
+    share of this recording's time spent there."""
+    regimes = EXPECTED.get(name, EXPECTED.get(by[name].effect, ())) if name in by else ()
+    if not regimes:
+        return "throughout"
+    union = None
+    for r in regimes:
+        m = masks.get(r)
+        if m is not None:
+            union = m.copy() if union is None else union | m
+    share = f" ({100 * float(np.mean(union)):.0f} % of this recording)" \
+        if union is not None and union.size else ""
+    return " / ".join(regimes) + share
+
+
+def tells_apart(a: Sequence[str], b: Sequence[str], by: Mapping[str, Candidate],
+                masks: Mapping[str, np.ndarray]) -> str:
+    """What data would separate explanation ``a`` from ``b`` (member names): the
+    operating regimes where the members that only one of them has show, with the share
+    of this recording spent in each (little time there: record more of it)."""
+    only_a = [m for m in a if m not in b] or list(a)
+    only_b = [m for m in b if m not in a] or list(b)
+    side = [" and ".join(f"{m} shows {_shows(m, by, masks)}" for m in ms)
+            for ms in (only_a, only_b)]
+    return f"{side[0]}; {side[1]}: a recording with more of those regimes separates them"
+
+
+def trade_offs(best: SetScore, by: Mapping[str, Candidate],
+               masks: Mapping[str, np.ndarray] | None = None) -> list[dict[str, Any]]:
     """Pairs of values of different members whose joint-fit correlation exceeds
-    :data:`TRADE_OFF`, with the regimes where each member's signature shows (data rich
-    in those regimes tells them apart)."""
+    :data:`TRADE_OFF`, with the regimes where each member's signature shows and the
+    share of the recording spent there (data rich in those regimes tells them apart)."""
     corr = best.result.corr if best.result is not None else {}
     owner = {f.key: m for m in best.names for f in by[m].free}
     out = []
     for (a, b), c in corr.items():
         if owner.get(a) == owner.get(b) or abs(c) < TRADE_OFF:
             continue
-        ra = EXPECTED.get(owner[a], EXPECTED.get(by[owner[a]].effect, ()))
-        rb = EXPECTED.get(owner[b], EXPECTED.get(by[owner[b]].effect, ()))
-        out.append({"values": [a, b], "correlation": round(float(c), 2),
-                    "tells_apart": f"{a} shows {' / '.join(ra) or 'throughout'}, {b} "
-                                   f"{' / '.join(rb) or 'throughout'}: a recording with more "
-                                   "of those regimes separates them"})
+        out.append({"values": [a, b], "members": [owner[a], owner[b]],
+                    "correlation": round(float(c), 2),
+                    "tells_apart": tells_apart([owner[a]], [owner[b]], by, masks or {})})
     return out
