@@ -267,7 +267,8 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
 
     Returns
     -------
-    (t, Z, U, rng): times (s), true states (n, 4: x, v, p_a, p_b), applied command (V),
+    (t, Z, U, rng): times (s), true states (n, 5: x, v, p_a, p_b and the supply pressure
+    at the valve, the reservoir's with supply droop), applied command (V),
     and the noise generator (position noise drawn, the pressures' still to draw).
     """
     P = load_plant(plant_file, overrides)
@@ -281,7 +282,7 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
     z = rig.initial(float(reference(0.0)), p0[0], p0[1], uc)
     lsb_x = rig.L / 4096
     nx = rng.normal(0, 20e-6, n)
-    Z = np.empty((n, 4))
+    Z = np.empty((n, 5))
     U = np.empty(n)
     atol = np.full(rig.n, 1e-2)
     atol[:2] = 1e-9, 1e-7
@@ -303,20 +304,23 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
         e_prev = e
         i1 = min(i0 + ratio, n - 1)
         U[i0:i1 + 1] = u
-        Z[i0] = z[:4]
+        Z[i0] = *z[:4], (z[rig.i_ps] if rig.droop else P["supply.pressure"])
         if i1 == i0:
             break
         sol = solve_ivp(rig.rhs, (t[i0], t[i1]), z, method="LSODA", args=(u,), rtol=rtol,
                         atol=atol, t_eval=t[i0:i1 + 1])
-        Z[i0 + 1:i1 + 1] = sol.y[:4, 1:].T
+        Z[i0 + 1:i1 + 1, :4] = sol.y[:4, 1:].T
+        Z[i0 + 1:i1 + 1, 4] = sol.y[rig.i_ps, 1:] if rig.droop else P["supply.pressure"]
         z = sol.y[:, -1]
     return t, Z, U, (rng, nx)
 
 
-def record(plant_file, reference, duration, seed, pressures=True, **kw):
+def record(plant_file, reference, duration, seed, pressures=True, supply=False, **kw):
     """:func:`simulate` logged as a Recording: noise (20 um, 500 Pa) and 12-bit quantisation;
-    ``pressures=False``: position only (the pressure noise is drawn all the same, so the
-    position is the same as with pressures)."""
+    ``pressures=False``: position only, ``"p_a"`` or ``"p_b"``: that chamber's pressure
+    only (the pressure noise is drawn all the same, so the other signals are the same as
+    with both pressures). ``supply=True``: the supply pressure at the valve is logged as
+    ``p_s`` too (noise and quantisation as the chamber pressures, drawn after theirs)."""
     from workbench.recording import Recording
     t, Z, U, (rng, nx) = simulate(plant_file, reference, duration, seed, **kw)
     n = len(t)
@@ -326,5 +330,9 @@ def record(plant_file, reference, duration, seed, pressures=True, **kw):
     PB = np.round((Z[:, 3] + rng.normal(0, 500.0, n)) / lsb_p) * lsb_p
     meta = {"sample_time": t[1] - t[0], "source": "tests/foreign_rig.py"}
     cols = {"p_a": PA, "p_b": PB} if pressures else {}
+    if isinstance(pressures, str):
+        cols = {pressures: cols[pressures]}
+    if supply:
+        cols["p_s"] = np.round((Z[:, 4] + rng.normal(0, 500.0, n)) / lsb_p) * lsb_p
     return Recording.from_arrays(t, u=U, x=X, r=np.asarray(reference(t), float),
                                  metadata=meta, **cols)

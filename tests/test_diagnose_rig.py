@@ -4,6 +4,8 @@ and test_diagnose_failsafe.py; units: workbench.recording.)"""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -59,3 +61,117 @@ def test_recorded_supply_pressure_is_used_and_a_sag_is_noted():
     assert any("sags under flow" in n for n in notes), notes
     same, notes = recorded_supply(plant, Recording.from_arrays(t, u=t, x=t))
     assert same is plant and notes == []
+
+
+# ---------------------------------------------------------------- issue 12 point 4, issue 15
+# Recordings of the independent simulator tests/foreign_rig.py (numpy/scipy, own valve,
+# lines and friction laws) on the 25 mm rig of synth in its PD loop.
+
+@pytest.fixture(scope="module")
+def plant_file(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rig")
+    return synth.concealed_case("none", seed=0).write_nominal(root / "plant.toml")
+
+
+def _foreign(plant_file, seed, duration, **kw):
+    import foreign_rig
+    return foreign_rig.record(plant_file, synth.rich_reference(seed, duration), duration,
+                              seed=seed, **kw)
+
+
+def test_in_memory_recording_is_checked_against_the_plant_first(plant_file):
+    """diagnose() on a Recording built in memory with x in mm (250 on a 0.5 m stroke):
+    refused at once with the unit hint, as replay() and the file loaders do (before the
+    check it was clipped into the stroke and diagnosed)."""
+    from workbench.diagnose import diagnose
+    from workbench.errors import InputError
+    t = np.arange(3000) * 1e-3
+    rec = Recording.from_arrays(t, u=np.full_like(t, 5.0), x=250.0 + 50 * np.sin(t))
+    with pytest.raises(InputError, match="mm"):
+        diagnose(plant_file, rec)
+    with pytest.raises(InputError, match="mm"):
+        diagnose(plant_file, [rec])
+
+
+def test_one_sided_pressure_is_used_not_dropped(plant_file):
+    """p_a recorded, p_b not; a leak of 2.5e-10 m^3/(s Pa) from both chambers to
+    atmosphere. Before: reduced to a position-only diagnosis (leakage not even a
+    candidate). Now p_a is fitted and anchored, p_b estimated by the force balance:
+    leakage is named within 30 % (measured -2 %), p_a and x are compared, p_b is not
+    (it is not measured). Candidates: the effects only pressures show, and the valve
+    offset (the full search is slow for the suite; searched in full it also names the
+    leak, measured -2 %, beside a spurious valve_dynamics -- see the issue note)."""
+    from workbench.diagnose import diagnose
+    rec = _foreign(plant_file, 5, 12.0, pressures="p_a",
+                   overrides={"leakage.conductance_to_atmosphere": 2.5e-10})
+    d = diagnose(plant_file, rec, effects=("leakage", "supply_droop", "heat_transfer",
+                                           "valve_offset"))
+    assert d.prep.signals == ("x", "p_a") and set(d.fit_after) == {"x", "p_a"}
+    found = {f.effect: f for f in d.findings}
+    assert "leakage" in found, d.summary()
+    assert found["leakage"].parameters["conductance_to_atmosphere"] == \
+        pytest.approx(2.5e-10, rel=0.3)
+    assert d.fit_after["p_a"] > d.fit_before["p_a"] + 50.0     # -175 % -> 90 % measured
+
+
+def test_force_balance_estimate_of_the_missing_pressure(plant_file):
+    """The unrecorded chamber's pressure from the recorded one and the piston's force
+    balance, against the recorded p_b of the same foreign run (no dry friction): rms
+    error 1.5 kPa measured, bound 5 kPa = 10 x the sensor noise (500 Pa) -- the
+    estimate carries the noise of p_a and of the twice-differentiated position times
+    the mass (A_a/A_b = 1 on this rig); p_b spans about 3 bar."""
+    from workbench.diagnose.data import other_side
+    rec = _foreign(plant_file, 5, 6.0, overrides={"leakage.conductance_to_atmosphere": 2.5e-10})
+    prep = prepare(Plant.from_toml(plant_file), rec)
+    est = other_side(prep.plant, "p_a", prep.pas, prep.xs, prep.v, prep.a)
+    assert np.sqrt(np.mean((est - prep.pbs) ** 2)) < 5e3
+    back = other_side(prep.plant, "p_b", prep.pbs, prep.xs, prep.v, prep.a)
+    assert np.sqrt(np.mean((back - prep.pas) ** 2)) < 5e3
+
+
+def test_recorded_supply_is_used_sample_by_sample(plant_file):
+    """The foreign rig's supply is a 0.3 l reservoir behind a regulator (4e-9 m^3/(s Pa)):
+    p_s sags by about 0.3 bar (6 %) under flow and is logged. The diagnosis takes it
+    sample by sample: the nominal replay (no droop in the plant file) then fits both
+    pressures as well as the noise and the sag allow (measured p_a 95.7 %, p_b 95.2 %;
+    bound 90 %), far better than with p_s's median as a constant (25.2 %, 11.0 %)."""
+    from workbench.diagnose.core import _fits, replay
+    plant = Plant.from_toml(plant_file)
+    rec = _foreign(plant_file, 5, 6.0, supply=True,
+                   overrides={"supply.reservoir_volume": 3e-4,
+                              "supply.regulator_conductance": 4e-9})
+    p2, notes = recorded_supply(plant.with_friction("stick"), rec)
+    assert any("sample by sample" in n for n in notes), notes
+    prep = prepare(p2, rec)
+    assert prep.supply is not None and np.ptp(prep.supply) > 0.2e5
+    by_sample = _fits(prep, replay(p2, prep))
+    prep.supply = None
+    constant = _fits(prep, replay(p2, prep))
+    for s in ("p_a", "p_b"):
+        assert by_sample[s] > 90.0 and by_sample[s] > constant[s] + 30.0, (by_sample, constant)
+
+
+def test_several_recordings_are_diagnosed_together(plant_file, tmp_path):
+    """Two 6 s runs of the same foreign rig (deadband 0.05, other references and noise)
+    given to ``workbench diagnose PLANT REC1 REC2``: one finding for both (deadband
+    within 30 %), the fit per recording in details.json and the report, each near the
+    joint fit, and the two joined without a prediction running from one into the next.
+    Candidates restricted to three (the joining is tested here, the search elsewhere)."""
+    import json
+    from workbench.cli import main
+    files = []
+    for seed in (5, 6):
+        rec = _foreign(plant_file, seed, 6.0, overrides={"valve.deadband": 0.05})
+        files.append(str(rec.to_csv(tmp_path / f"run{seed}.csv")))
+    out = tmp_path / "diag"
+    code = main(["diagnose", str(plant_file), *files, "--out", str(out), "--quiet",
+                 "--effects", "valve_deadband", "leakage", "valve_offset", "--no-report"])
+    assert code == 0
+    res = json.loads((out / "diagnosis.json").read_text())
+    assert [f["effect"] for f in res["findings"]] == ["valve_deadband"]
+    assert res["findings"][0]["parameters"]["deadband"] == pytest.approx(0.05, rel=0.3)
+    per = json.loads((out / "details.json").read_text())["recordings"]
+    assert [Path(r["recording"]).name for r in per] == ["run5.csv", "run6.csv"]
+    assert [r["start_s"] for r in per] == [0.0, pytest.approx(6.0, abs=0.02)]
+    for r in per:                   # each recording is explained, not only their union
+        assert r["fit_after"]["x"] > 95.0 and r["fit_after"]["x"] > r["fit_before"]["x"]

@@ -1,4 +1,4 @@
-"""``workbench diagnose PLANT.toml RECORDING --out DIR`` (:func:`workbench.diagnose.diagnose`)."""
+"""``workbench diagnose PLANT.toml RECORDING [RECORDING ...] --out DIR`` (:func:`workbench.diagnose.diagnose`)."""
 
 from __future__ import annotations
 
@@ -34,7 +34,9 @@ def register(subparsers) -> None:
                               epilog="Units are SI (m, Pa absolute, kg, s, V). Example: "
                                      "workbench diagnose plant.toml run.csv --out diag/")
     p.add_argument("plant", metavar="PLANT.toml", help="nominal plant file")
-    p.add_argument("recording", metavar="RECORDING", help="recording (.csv or .mat)")
+    p.add_argument("recording", metavar="RECORDING", nargs="+",
+                   help="recording (.csv or .mat); several: experiments on the same rig "
+                        "diagnosed together (one set of findings, the fit per recording)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--json", action="store_true", help="print diagnosis.json instead of a summary")
     p.add_argument("--quiet", action="store_true", help="no progress messages (on stderr)")
@@ -61,10 +63,11 @@ def _diagnose(args: argparse.Namespace) -> int:
         print(f"diagnosing {args.recording} on {args.plant} ...", file=sys.stderr, flush=True)
     from ..params import PlantParams
     from .recording_args import load_from_args
-    rec = load_from_args(args, args.recording, plant=PlantParams.from_toml(args.plant))
-    d = diagnose(args.plant, rec, effects=args.effects, workers=args.workers,
-                 mode=args.mode, verbose=verbose)
-    paths = d.write(args.out, report=not args.no_report, inputs=[args.plant, args.recording])
+    params = PlantParams.from_toml(args.plant)
+    recs = [load_from_args(args, r, plant=params) for r in args.recording]
+    d = diagnose(args.plant, recs if len(recs) > 1 else recs[0], effects=args.effects,
+                 workers=args.workers, mode=args.mode, verbose=verbose)
+    paths = d.write(args.out, report=not args.no_report, inputs=[args.plant, *args.recording])
     if args.json:
         print(json.dumps(d.to_dict(), indent=2))
     else:

@@ -59,7 +59,7 @@ from ..params import PlantParams, atomic_write_text
 from ..plant import Plant
 from ..recording import Recording, fit
 from .candidates import Candidate, candidates as make_candidates
-from .data import Prepared, prepare, recorded_supply
+from .data import Prepared, prepare_many, recorded_supply
 from .evidence import confidence, evidence_text
 from .explain import Chosen, Ranked, Refits, promising, refit_fully, screen
 from .sets import search
@@ -149,6 +149,7 @@ class Diagnosis:
     remaining: dict[str, dict[str, float]] = field(default_factory=dict)
     unexplained: list[str] = field(default_factory=list)
     sets: dict[str, Any] = field(default_factory=dict)
+    recordings: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """The diagnosis result of formats.md section 4 (exactly those keys)."""
@@ -174,7 +175,7 @@ class Diagnosis:
                 for r in self.ranking],
             "grey_box_polish": self.polished,
             "remaining_vs_noise": self.remaining, "unexplained": list(self.unexplained),
-            "sets": self.sets,
+            "sets": self.sets, "recordings": self.recordings,
             "timings_s": self.timings,
         }
 
@@ -195,6 +196,9 @@ class Diagnosis:
             lines.append(f"  {i}. {f.effect} (confidence {f.confidence:.2f}): {par}")
             lines.append(f"     {f.evidence}")
         lines.append(f"  fit after:  {fits(self.fit_after)}")
+        for r in self.recordings if len(self.recordings) > 1 else ():
+            lines.append(f"    {r['recording']}: before {fits(r['fit_before'])}; "
+                         f"after {fits(r['fit_after'])}")
         if self.sets:
             lines.append(f"  {self.sets.get('candidate_models', 0)} candidate models evaluated "
                          "(single effects, pairs and triples)")
@@ -214,7 +218,7 @@ class Diagnosis:
         out = Path(out_dir)
         names = {"json": "diagnosis.json", "plant": "plant.augmented.toml",
                  "details": "details.json"}
-        ins = list(inputs) or [self.plant_file, self.recording_file]
+        ins = list(inputs) or [self.plant_file, *self.recording_file.split(" + ")]
         with result_set(out, inputs=[i for i in ins if i]) as stage:
             atomic_write_text(stage / names["json"], json.dumps(self.to_dict(), indent=2) + "\n")
             self.augmented.to_toml(stage / names["plant"])
@@ -272,12 +276,15 @@ def replay(plant: Plant, prep: Prepared) -> dict[str, np.ndarray]:
     open loop on u on the engine re-anchored every :data:`OPEN_ANCHOR` s
     (:class:`EngineOpenLoop`). Returns x, p_a, p_b, u on the recording's samples."""
     from .. import replay as rp
+    if prep.parts:             # several recordings: each replayed on its own
+        runs = [replay(plant, part) for part in prep.parts]
+        return {k: np.concatenate([r[k] for r in runs]) for k in ("x", "p_a", "p_b", "u")}
     if not prep.closed:
         return EngineOpenLoop(prep, OPEN_ANCHOR)(plant, prep.rec)
-    pressures = ({"p_a": float(prep.pas[0]), "p_b": float(prep.pbs[0])}
-                 if prep.has_pressures else {})
+    if prep.supply is not None:   # p_s sample by sample: the engine's closed loop, unbroken
+        return EngineOpenLoop(prep, 2.0 * prep.t[-1] + 1.0)(plant, prep.rec)
     x0 = rp.initial_state(plant, prep.rec, u0=float(prep.rec["u"][0]),
-                          recorded_pressures=False, **pressures)
+                          recorded_pressures=False, **prep.first_pressures())
     strategy = rp.Fallback(rp.ClosedLoop(prep.controller), EngineOpenLoop(prep, 2.0))
     run = rp.run(plant, prep.rec, strategy, x0=x0)
     return {k: np.asarray(run[k], dtype=float) for k in ("x", "p_a", "p_b", "u")}
@@ -305,7 +312,8 @@ def _fits(prep: Prepared, sim: Mapping[str, np.ndarray]) -> dict[str, float]:
 
 
 # ---------------------------------------------------------------------- the diagnosis
-def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Recording,
+def diagnose(plant: str | os.PathLike | Plant,
+             recording: str | os.PathLike | Recording | Sequence[str | os.PathLike | Recording],
              effects: Sequence[str] | None = None, workers: int | None = None,
              mode: str = "auto", verbose: bool = False, jit: bool = True,
              max_nfev: int = 10, budget_s: float | None = None,
@@ -315,7 +323,11 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
     Parameters
     ----------
     plant : plant file (formats.md sections 1-2) or Plant.
-    recording : recording file (section 3) or Recording.
+    recording : recording file (section 3) or Recording, or a list of them: several
+        experiments on the same rig, diagnosed together (one set of findings for all,
+        the fit per recording in ``Diagnosis.recordings``; :func:`.data.prepare_many`).
+        Each is checked against the plant first (:meth:`Recording.check`: units, stroke,
+        command range), as :func:`workbench.replay.replay` does.
     effects : candidate effects to test (names of section 2 and/or ``parameter_error``);
         default all.
     workers : processes for the candidate refits (default the CPU count).
@@ -334,17 +346,18 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
     Raises
     ------
     InputError
-        Unusable input (see :func:`.data.prepare`).
+        Unusable input (see :meth:`Recording.check`, :func:`.data.prepare` and
+        :func:`.data.prepare_many`).
     DiagnosisError
         The nominal replay fails (non-finite, piston beyond the stops) or fits a signal
         worse than a constant and no candidate explains it, or the augmented replay
         fails (:func:`.health.verdict`): never reported as "no finding".
     """
     clock = _Clock(verbose)
-    plant, plant_file, recording, rec_file = _load(plant, recording)
+    plant, plant_file, recs, rec_file = _load(plant, recording)
     clock.restart()
-    plant, supply_notes = recorded_supply(plant, recording)
-    prep = prepare(plant, recording, mode)
+    plant, supply_notes = recorded_supply(plant, recs)
+    prep = prepare_many(plant, recs, mode)
     prep.notes[:0] = supply_notes
     params = plant.params
     clock.tick("prepare")
@@ -356,7 +369,10 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
     nom = _nominal(prep, params, jit)
     clock.tick("witnesses and regimes")
     # 3. explain: every candidate screened, the most promising refitted fully
-    cands = make_candidates(params, effects, prep.has_pressures)
+    cands = make_candidates(params, effects, bool(prep.pressures))
+    if prep.supply is not None:        # the recorded p_s is the supply: nothing to fit
+        cands = [c for c in cands if c.effect != "supply_droop"
+                 and c.name != "parameter_error:supply.pressure"]
     refits = Refits(prep, params, nom.shpe, nom.seg, nom.masks, workers, jit)
     nothing = Chosen.nothing(nom.cost, nom.seg_cost, nom.err)
     ranking = screen(refits, cands, nothing)
@@ -384,6 +400,7 @@ def diagnose(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Re
     remaining, still, notes = verdict(prep, sim0, [f.effect for f in findings], sim_after,
                                       nom.masks, _no_finding_note(ranking))
     return Diagnosis(
+        recordings=_per_recording(prep, sim0, sim_after if findings else sim0),
         plant_file=plant_file, recording_file=rec_file, fit_before=fit_before,
         fit_after=findings[-1].fit_after if findings else dict(fit_before), findings=findings,
         ranking=ranking, located=nom.located, regime_share=nom.share,
@@ -426,20 +443,41 @@ class _Clock:
         return self.timings
 
 
-def _load(plant: str | os.PathLike | Plant, recording: str | os.PathLike | Recording
-          ) -> tuple[Plant, str, Recording, str]:
-    """The plant (stick-slip friction) and recording, loaded when given as files, and
-    the file names the result reports."""
+def _load(plant, recording) -> tuple[Plant, str, list[Recording], str]:
+    """The plant (stick-slip friction) and the recordings, loaded when given as files and
+    checked against the plant (:meth:`Recording.check`: what a file loader checks, and
+    mm, ms, the stroke and the command range), and the file names the result reports."""
+    from ..errors import InputError
+    from ..recording import load_recording
     plant_file = str(plant) if not isinstance(plant, Plant) else plant.params.source
     if not isinstance(plant, Plant):
         plant = Plant.from_toml(plant)
-    rec_file = str(recording) if not isinstance(recording, Recording) else recording.source
-    if not isinstance(recording, Recording):
-        from ..recording import load_recording
-        recording = load_recording(recording)
+    many = isinstance(recording, (list, tuple))
+    items = list(recording) if many else [recording]
+    if not items:
+        raise InputError("no recording given: a diagnosis needs at least one")
+    recs = [r if isinstance(r, Recording) else load_recording(r) for r in items]
+    names = [r.source if isinstance(r, Recording) else str(r) for r in items]
+    for r in recs:
+        r.check(plant)
     if plant.friction != "stick":
         plant = plant.with_friction("stick")
-    return plant, plant_file, recording, rec_file
+    return plant, plant_file, recs, " + ".join(str(n) for n in names)
+
+
+def _per_recording(prep: Prepared, sim0: Mapping[str, np.ndarray],
+                   sim1: Mapping[str, np.ndarray]) -> list[dict[str, Any]]:
+    """Fit (%) per signal before and after, per recording (one entry for one recording)."""
+    parts = prep.parts or [prep]
+    cuts = list(prep.starts or [0]) + [prep.n]
+    out = []
+    for part, a, b in zip(parts, cuts[:-1], cuts[1:]):
+        def sl(sim):
+            return {k: np.asarray(v)[a:b] for k, v in sim.items()}
+        out.append({"recording": str(part.rec.source), "start_s": round(float(a * prep.dt), 6),
+                    "duration_s": round(float((b - a) * prep.dt), 6),
+                    "fit_before": _fits(part, sl(sim0)), "fit_after": _fits(part, sl(sim1))})
+    return out
 
 
 def _mode_text(prep: Prepared) -> str:
@@ -469,10 +507,28 @@ class _Nominal:
 
 def _predictors(prep: Prepared) -> tuple[Predictor, Predictor | None]:
     """The refit objective (short-horizon predictions) and its closed-loop check
-    (re-anchored segments, closed loop only)."""
-    if prep.closed and not prep.has_pressures:
-        return segments(prep, 1.0), None     # open-loop horizons drift without pressures
-    return horizons(prep), (segments(prep) if prep.closed else None)
+    (re-anchored segments, closed loop only), re-anchored where a recording starts."""
+    if prep.closed and not prep.pressures:
+        return _at_starts(segments(prep, 1.0), prep), None   # horizons drift without p
+    seg = _at_starts(segments(prep), prep) if prep.closed else None
+    return _at_starts(horizons(prep), prep), seg
+
+
+def _at_starts(pred: Predictor, prep: Prepared) -> Predictor:
+    """``pred`` re-anchored (state, pressures, hidden states, controller memory) at the
+    first simulated sample of each joined recording after the first (several recordings:
+    no prediction runs from one into the next)."""
+    from .engine import INPUT_ROWS
+    if len(prep.starts) < 2:
+        return pred
+    d = pred.inputs.data.copy()
+    pos = np.searchsorted(pred.index, np.asarray(prep.starts[1:]))
+    pos = pos[pos < len(pred.index)]
+    for name in ("anchor", "anchor_hidden") + (("anchor_p",) if prep.pressures else ()):
+        d[INPUT_ROWS.index(name), pos] = 1.0
+    pred.inputs = type(pred.inputs)(d)
+    pred.starts = np.unique(np.concatenate([pred.starts, pos]))
+    return pred
 
 
 def _nominal(prep: Prepared, params: PlantParams, jit: bool) -> _Nominal:

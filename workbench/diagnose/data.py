@@ -25,7 +25,7 @@ from ..replay import controller_agreement as _controller_agreement
 from ..replay import controller_phase as _controller_phase
 from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
 
-__all__ = ["Prepared", "prepare", "uniform", "recorded_supply", "MIN_DURATION",
+__all__ = ["Prepared", "prepare", "prepare_many", "other_side", "uniform", "recorded_supply", "MIN_DURATION",
            "SHORT_DURATION", "savgol"]
 
 #: s: shorter recordings are refused (a few closed-loop time constants at least).
@@ -60,6 +60,10 @@ class Prepared:
     noise : sensor noise per signal (same unit), :func:`workbench.signals.noise_floor`.
     signals : the measured outputs fitted (x, and p_a, p_b when recorded).
     notes : what was reduced or assumed, in words for the report.
+    supply : recorded supply pressure (Pa, smoothed), used sample by sample, when it
+        varies (:func:`supply_profile`); else None (the plant's constant).
+    parts, starts : several recordings joined (:func:`prepare_many`): each prepared
+        alone, and the sample where each starts.
     """
 
     plant: Plant
@@ -86,6 +90,9 @@ class Prepared:
     win_p: int
     win_slow: int
     notes: list[str] = field(default_factory=list)
+    supply: np.ndarray | None = None
+    parts: list["Prepared"] = field(default_factory=list, repr=False)
+    starts: list[int] = field(default_factory=list)
 
     @property
     def n(self) -> int:
@@ -93,7 +100,24 @@ class Prepared:
 
     @property
     def has_pressures(self) -> bool:
+        """Both chamber pressures recorded (flow witnesses, pressure regimes, polish)."""
         return self.p_a is not None and self.p_b is not None
+
+    @property
+    def pressures(self) -> tuple[str, ...]:
+        """The chamber pressures recorded: ("p_a", "p_b"), one of them, or ()."""
+        return tuple(s for s in ("p_a", "p_b") if getattr(self, s) is not None)
+
+    def smoothed(self, side: str) -> np.ndarray:
+        """The smoothed pressure ``side`` ("p_a" or "p_b"), Pa; with only one recorded,
+        the other is its estimate by the piston's force balance (:func:`other_side`)."""
+        return {"p_a": self.pas, "p_b": self.pbs}[side]
+
+    def first_pressures(self) -> dict[str, float]:
+        """Both smoothed pressures at the first sample (Pa) when any is recorded (the
+        other one estimated, :func:`other_side`), by name; {} without pressures."""
+        return {s: float(self.smoothed(s)[0]) for s in ("p_a", "p_b")} if self.pressures \
+            else {}
 
     def measured(self, name: str) -> np.ndarray:
         return {"x": self.x, "p_a": self.p_a, "p_b": self.p_b}[name]
@@ -122,8 +146,10 @@ class Prepared:
             return np.zeros(self.n)
         e = np.asarray(self.rec["r"]) - self.x
         idx = np.arange(self.n)
-        prev = np.where(idx - self.ratio >= 0, idx - self.ratio, idx)
-        return e[prev]
+        first = np.asarray(self.starts or [0])[np.searchsorted(self.starts or [0], idx,
+                                                                side="right") - 1]
+        prev = np.where(idx - self.ratio >= first, idx - self.ratio, idx)
+        return e[prev]        # within one recording (several: :func:`prepare_many`)
 
 
 def _plant_controller(plant: Plant, rec: Recording, dt: float,
@@ -144,23 +170,62 @@ def _plant_controller(plant: Plant, rec: Recording, dt: float,
 
 
 def _smoothed(rec: Recording, x: np.ndarray, dt: float, win_x: int, win_p: int,
-              has_p: bool) -> dict[str, Any]:
+              sides: tuple[str, ...], starts: list[int] | None = None) -> dict[str, Any]:
     """Smoothed signals, their derivatives and the noise floors (Prepared's fields).
 
     Position: cubic Savitzky-Golay over ``win_x`` samples (value, velocity m/s,
-    acceleration m/s^2); pressures: quadratic over ``win_p`` (value, rate Pa/s).
+    acceleration m/s^2); pressures ``sides``: quadratic over ``win_p`` (value, rate
+    Pa/s). Several recordings joined (``starts``: first sample of each): each is
+    smoothed on its own (no filter window across a junction), the noise is the median
+    of theirs.
     """
+    cuts = list(starts or [0]) + [len(x)]
+
+    def piecewise(fun, y):
+        return np.concatenate([fun(y[a:b]) for a, b in zip(cuts[:-1], cuts[1:])])
+
+    def noise(y):
+        return float(np.median([noise_floor(y[a:b]) for a, b in zip(cuts[:-1], cuts[1:])]))
+
     out: dict[str, Any] = {
-        "xs": smooth(x, win_x, 3), "v": derivative(x, dt, 3, win_x),
-        "a": derivative(x, dt, 3, win_x, deriv=2), "noise": {"x": noise_floor(x), "u": 0.0},
+        "xs": piecewise(lambda y: smooth(y, win_x, 3), x),
+        "v": piecewise(lambda y: derivative(y, dt, 3, win_x), x),
+        "a": piecewise(lambda y: derivative(y, dt, 3, win_x, deriv=2), x),
+        "noise": {"x": noise(x), "u": 0.0},
         "p_a": None, "p_b": None, "pas": None, "pbs": None, "dpa": None, "dpb": None}
-    if has_p:
-        for name, short in (("p_a", "a"), ("p_b", "b")):
-            p = np.asarray(rec[name], dtype=float)
-            out[name], out[f"p{short}s"] = p, smooth(p, win_p, 2)
-            out[f"dp{short}"] = derivative(p, dt, 2, win_p)
-            out["noise"][name] = noise_floor(p)
+    for name in sides:
+        short = name[-1]
+        p = np.asarray(rec[name], dtype=float)
+        out[name], out[f"p{short}s"] = p, piecewise(lambda y: smooth(y, win_p, 2), p)
+        out[f"dp{short}"] = piecewise(lambda y: derivative(y, dt, 2, win_p), p)
+        out["noise"][name] = noise(p)
     return out
+
+
+def other_side(plant: Plant, side: str, p: np.ndarray, x: np.ndarray, v: np.ndarray,
+               a: np.ndarray) -> np.ndarray:
+    """The chamber pressure that is not recorded (Pa), from the recorded one ``p`` (Pa,
+    chamber ``side``) and the piston's force balance along the smoothed position ``x``
+    (m), velocity ``v`` (m/s) and acceleration ``a`` (m/s^2):
+    p_a A_a - p_b A_b - p_atm (A_a - A_b) = m a + beta v + F_ext - F_stop (+ the plant
+    file's dry friction, if it has one, in its smooth form). Dry friction the plant
+    file lacks is not known here and biases the estimate by up to F_s / A. Clipped to
+    [0.5 p_atm, 1.1 p_supply]."""
+    from ..physics import friction, piston
+    pr = plant.params
+    m, beta = pr["load.mass"], pr["load.viscous_friction"]
+    need = m * a + beta * v + pr["load.external_force"] - np.asarray(
+        [float(piston.end_stop_force(xi, vi, plant.stroke, m)) for xi, vi in zip(x, v)]
+        if np.any((x < 0) | (x > plant.stroke)) else np.zeros(len(x)))
+    if pr.has_effect("dry_friction"):
+        need = need + friction.smooth_friction(v, pr["friction.coulomb"], pr["friction.static"],
+                                               pr["friction.stribeck_velocity"], 0.0)
+    aa, ab, p_atm = plant.area_a, plant.area_b, pr["gas.atmospheric_pressure"]
+    if side == "p_a":
+        est = (p * aa - p_atm * (aa - ab) - need) / ab
+    else:
+        est = (need + p * ab + p_atm * (aa - ab)) / aa
+    return np.clip(est, 0.5 * p_atm, 1.1 * pr["supply.pressure"])
 
 
 #: Recorded columns held (zero-order) when resampling: the command and reference are
@@ -189,13 +254,35 @@ def uniform(rec: Recording, dt: float) -> Recording:
     return Recording.from_arrays(grid, source=rec.source, metadata=meta, **cols)
 
 
-def recorded_supply(plant: Plant, rec: Recording) -> tuple[Plant, list[str]]:
-    """The plant with the recorded supply pressure ``p_s`` (its median, Pa) when the
-    recording has one and the plant has no supply droop, and notes: the value used, and
-    a sag under flow (which the supply_droop candidate models) when p_s varies."""
-    if "p_s" not in rec:
-        return plant, []
+#: Relative 1..99 % spread of a recorded p_s above which it is used sample by sample
+#: (below: its median as a constant; 3 % of 6 bar = 0.18 bar, several times a
+#: pressure sensor's noise, and about what moves a 25 mm piston's force by 9 N).
+SAG = 0.03
+
+
+def supply_profile(plant: Plant, rec: Recording, win: int) -> np.ndarray | None:
+    """The recorded supply pressure (Pa) smoothed over ``win`` samples, when the
+    recording has ``p_s``, it varies by more than :data:`SAG` and the plant file does
+    not model the supply as a reservoir (supply_droop); else None."""
+    if "p_s" not in rec or plant.params.has_effect("supply_droop"):
+        return None
     ps = np.asarray(rec["p_s"], dtype=float)
+    med = float(np.median(ps))
+    if float(np.percentile(ps, 99) - np.percentile(ps, 1)) <= SAG * med:
+        return None
+    return smooth(ps, win, 2)
+
+
+def recorded_supply(plant: Plant, rec: Recording | list[Recording]
+                    ) -> tuple[Plant, list[str]]:
+    """The plant with the recorded supply pressure ``p_s`` (its median, Pa) when the
+    recording (or any of several) has one and the plant has no supply droop, and notes:
+    the value used, and a sag under flow (which the supply_droop candidate models) when
+    p_s varies."""
+    recs = [r for r in (rec if isinstance(rec, (list, tuple)) else [rec]) if "p_s" in r]
+    if not recs:
+        return plant, []
+    ps = np.concatenate([np.asarray(r["p_s"], dtype=float) for r in recs])
     med = float(np.median(ps))
     nominal = float(plant.params["supply.pressure"])
     notes = []
@@ -207,13 +294,35 @@ def recorded_supply(plant: Plant, rec: Recording) -> tuple[Plant, list[str]]:
         notes.append(f"the recorded supply pressure p_s (median {med / 1e5:.4g} bar) is used "
                      f"instead of the plant file's {nominal / 1e5:.4g} bar")
     sag = float(np.percentile(ps, 99) - np.percentile(ps, 1))
-    if sag > 0.03 * med:
+    if sag > SAG * med:
         notes.append(f"the recorded supply pressure varies by {sag / 1e5:.3g} bar "
-                     f"({100 * sag / med:.0f} %): it sags under flow (see supply_droop)")
+                     f"({100 * sag / med:.0f} %): it sags under flow, so the replays take "
+                     "it sample by sample (the supply_droop and supply-pressure candidates "
+                     "are not needed and left out)")
     return plant, notes
 
 
-def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
+def _pressure_notes(sides: tuple[str, ...]) -> list[str]:
+    """What a recording without one or both chamber pressures allows, in words."""
+    out: list[str] = []
+    if not sides:
+        out.append("the recording has neither p_a nor p_b: the diagnosis is reduced to "
+                   "what the position shows (dry friction, valve deadband and offset, mass "
+                   "and viscous friction); leakage, lines, supply droop and heat transfer "
+                   "cannot be told apart from position alone")
+    elif len(sides) == 1:
+        other = "p_b" if sides == ("p_a",) else "p_a"
+        out.append(f"the recording has {sides[0]} but no {other}: the predictions are "
+                   f"re-anchored on the measured {sides[0]} and on {other} estimated from "
+                   "the piston's force balance (nominal mass, viscous friction and load; "
+                   "dry friction, unknown, biases it by F/A); the fit compares x and "
+                   f"{sides[0]}; the flow witnesses (which need both pressures) are not "
+                   "available")
+    return out
+
+
+def prepare(plant: Plant, rec: Recording, mode: str = "auto",
+            starts: list[int] | None = None) -> Prepared:
     """Check the recording against the plant and prepare the signals.
 
     Parameters
@@ -221,6 +330,8 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
     plant : the nominal plant.
     rec : the recording.
     mode : "auto", "closed" or "open" (replay mode).
+    starts : first sample of each recording when ``rec`` joins several
+        (:func:`prepare_many`); each is smoothed on its own.
 
     Raises
     ------
@@ -259,15 +370,8 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
         raise InputError(f"the piston hardly moves in this recording (position range "
                          f"{np.ptp(x) * 1e3:.3g} mm): nothing to diagnose", source=src,
                          location="column 'x'")
-    has_p = "p_a" in rec and "p_b" in rec
-    if not has_p:
-        what = "neither p_a nor p_b" if ("p_a" not in rec and "p_b" not in rec) else \
-            ("no p_b" if "p_a" in rec else "no p_a")
-        notes.append(f"the recording has {what}: without both chamber pressures the flow "
-                     "witnesses are not available, so the diagnosis is reduced to what the "
-                     "position shows (dry friction, valve deadband and offset, mass and "
-                     "viscous friction); leakage, lines, supply droop and heat transfer "
-                     "cannot be told apart from position alone")
+    sides = tuple(s for s in ("p_a", "p_b") if s in rec)
+    notes += _pressure_notes(sides)
     has_r = "r" in rec
     has_ctrl = plant.params.has_controller
     controller, ratio, phase = _plant_controller(plant, rec, dt, notes)
@@ -287,7 +391,11 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
         notes.append("the plant file has a [controller] but the recording has no reference r: "
                      "open-loop replay on the recorded command u, re-anchored")
     win_x, win_p = odd_window(WINDOW_X, dt), odd_window(WINDOW_P, dt)
-    sm = _smoothed(rec, x, dt, win_x, win_p, has_p)
+    sm = _smoothed(rec, x, dt, win_x, win_p, sides, starts)
+    if len(sides) == 1:
+        other = "p_b" if sides == ("p_a",) else "p_a"
+        sm[f"p{other[-1]}s"] = other_side(plant, sides[0], sm[f"p{sides[0][-1]}s"],
+                                          sm["xs"], sm["v"], sm["a"])
     if has_r and controller is not None and mode != "open":
         closed = True
         agree = _controller_agreement(plant, controller, rec, x, phase, ratio)
@@ -298,6 +406,74 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto") -> Prepared:
                          "recording is replayed open loop on u, re-anchored")
     return Prepared(plant=plant, rec=rec, t=t, dt=dt, closed=closed,
                     controller=controller if closed else controller, ratio=ratio, phase=phase,
-                    x=x, **sm, signals=("x",) + (("p_a", "p_b") if has_p else ()),
+                    x=x, **sm, signals=("x",) + sides,
                     win_x=win_x, win_p=win_p, win_slow=odd_window(WINDOW_SLOW, dt, 9),
-                    notes=notes)
+                    notes=notes, starts=list(starts or []),
+                    supply=supply_profile(plant, rec, win_p))
+
+
+def _piece(rec: Recording, a: int, b: int) -> Recording:
+    """Samples ``a:b`` of ``rec`` (time from its first kept sample)."""
+    t = np.asarray(rec.t, dtype=float)[a:b]
+    return Recording.from_arrays(t - t[0], source=rec.source,
+                                 metadata=dict(getattr(rec, "metadata", {}) or {}),
+                                 **{c: np.asarray(rec[c])[a:b] for c in rec.columns if c != "t"})
+
+
+def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Prepared:
+    """Several recordings of the same rig prepared as one (one model explains them all).
+
+    The recordings are put end to end on one time axis (each starts one sample time
+    after the previous one ends; those with another sample time are resampled on the
+    first one's, :func:`uniform`), each smoothed on its own, in one replay mode (closed
+    loop only if every one is). In closed loop each is cut to whole controller periods
+    from a controller update, so the joined recording's updates keep one phase. The
+    result's ``parts`` are the recordings prepared alone (the replays and the fit per
+    recording use them) and ``starts`` their first samples in the joined one: the
+    predictions are re-anchored there (:func:`workbench.diagnose.core.diagnose`).
+
+    Raises
+    ------
+    InputError
+        No recording, or recordings with different measured signals (x, p_a, p_b).
+    """
+    if not recs:
+        raise InputError("no recording given: a diagnosis needs at least one")
+    if len(recs) == 1:
+        return prepare(plant, recs[0], mode)
+    parts = [prepare(plant, r, mode) for r in recs]
+    if len({p.signals for p in parts}) > 1:
+        which = "; ".join(f"{p.rec.source}: {', '.join(p.signals)}" for p in parts)
+        raise InputError("recordings diagnosed together must measure the same signals "
+                         f"({which}): diagnose them separately, or drop the extra columns",
+                         source=parts[-1].rec.source)
+    closed, some_closed = all(p.closed for p in parts), any(p.closed for p in parts)
+    mode = "closed" if closed else "open"
+    dt = parts[0].dt
+    recs = [p.rec if abs(p.dt - dt) <= 1e-3 * dt else uniform(p.rec, dt) for p in parts]
+    parts = [prepare(plant, r, mode) for r in recs]
+    ratio = parts[0].ratio if closed else 1
+    pieces = []
+    for p in parts:
+        a = p.phase if closed else 0
+        pieces.append(_piece(p.rec, a, a + (p.n - a) // ratio * ratio))
+    parts = [prepare(plant, r, mode) for r in pieces]
+    cols = [c for c in pieces[0].columns if c != "t" and all(c in r for r in pieces)]
+    starts = [int(s) for s in np.cumsum([0] + [len(r.t) for r in pieces[:-1]])]
+    t = dt * np.arange(sum(len(r.t) for r in pieces))
+    joined = Recording.from_arrays(
+        t, source=" + ".join(str(r.source) for r in pieces),
+        metadata={"sample_time": repr(dt)},
+        **{c: np.concatenate([np.asarray(r[c], dtype=float) for r in pieces]) for c in cols})
+    prep = prepare(plant, joined, mode, starts)
+    prep.parts = parts
+    notes = [f"{len(parts)} recordings diagnosed together (one model for all; fit per "
+             "recording in details.json): " + ", ".join(
+                 f"{p.rec.source} from {dt * s:.3g} s" for p, s in zip(parts, starts))]
+    if some_closed and not closed:
+        notes.append("not every recording can be replayed in closed loop: all are replayed "
+                     "open loop on u, re-anchored")
+    for p in parts:       # (a part's "short recording" is not the joined one's)
+        notes += [n for n in p.notes if n not in notes and not n.startswith("short record")]
+    prep.notes = notes + [n for n in prep.notes if n not in notes]
+    return prep

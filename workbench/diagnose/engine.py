@@ -52,7 +52,8 @@ OUTPUTS = ("x", "p_a", "p_b", "u", "dv", "dp_a", "dp_b")
 
 #: Rows of the per-sample input.
 INPUT_ROWS = ("r", "u_rec", "control_instant", "closed_loop", "anchor", "anchor_p",
-              "anchor_hidden", "x_m", "v_m", "p_a_m", "p_b_m", "e_prev_m")
+              "anchor_hidden", "x_m", "v_m", "p_a_m", "p_b_m", "e_prev_m", "use_p_s", "p_s_m")
+# use_p_s, p_s_m: where use_p_s is 1 the supply pressure is the recorded p_s_m (Pa)
 
 #: More states than this: numeric linear solves (a symbolic inverse grows too big).
 _SX_LIMIT = 16
@@ -246,6 +247,11 @@ class Engine:
         inp = ca.MX.sym("in", len(INPUT_ROWS))
         ps = ca.MX.sym("p", npar)
         row = {n: inp[i] for i, n in enumerate(INPUT_ROWS)}
+        p_k = ps                        # the parameters at this sample (a recorded p_s)
+        if "supply.pressure" in plant.param_names:
+            i_s = plant.param_index("supply.pressure")
+            p_k = ca.vertcat(ps[:i_s], ca.if_else(row["use_p_s"], row["p_s_m"], ps[i_s]),
+                             ps[i_s + 1:])
         ix, iv = plant.state_index("x"), plant.state_index("v")
         ia, ib = plant.state_index("p_a"), plant.state_index("p_b")
         # re-anchoring on the measurement
@@ -254,7 +260,7 @@ class Engine:
                     ib: ca.if_else(row["anchor_p"], row["p_b_m"], zs[ib])}
         meas = ca.vertcat(*[measured.get(i, zs[i]) for i in range(nx)])
         z_anch = ca.if_else(row["anchor"], meas, zs)
-        z_anch = ca.if_else(row["anchor_hidden"], _hidden_rest(plant, z_anch, row["u_rec"], ps),
+        z_anch = ca.if_else(row["anchor_hidden"], _hidden_rest(plant, z_anch, row["u_rec"], p_k),
                             z_anch)
         c_prev = ca.if_else(row["anchor"], row["e_prev_m"], cs[0])
         prm = plant.params
@@ -276,10 +282,10 @@ class Engine:
             uu = ca.if_else(row["closed_loop"], u_held, row["u_rec"])
         else:
             u_held, e_prev, integ, uu = cs[2], c_prev, cs[1], row["u_rec"]
-        zn = step(z_anch, uu, ps)
+        zn = step(z_anch, uu, p_k)
         outs = [z_anch[ix], z_anch[ia], z_anch[ib], uu]
         if rates:
-            fz = plant.f(z_anch, uu, ps)
+            fz = plant.f(z_anch, uu, p_k)
             outs += [fz[iv], fz[ia], fz[ib]]
         self.rows = OUTPUTS if rates else OUTPUTS[:4]
         G = ca.Function("sample", [zs, cs, inp, ps],

@@ -141,11 +141,13 @@ def _base_inputs(prep: Prepared, index: np.ndarray, step: int = 1) -> np.ndarray
     d[row["u_rec"]] = u[index]
     d[row["x_m"]] = prep.xs[index]
     d[row["v_m"]] = prep.v[index]
-    if prep.has_pressures:
+    if prep.pressures:        # one recorded: the other is estimated (Prepared.smoothed)
         d[row["p_a_m"]] = prep.pas[index]
         d[row["p_b_m"]] = prep.pbs[index]
     if "r" in prep.rec:
         d[row["r"]] = np.asarray(prep.rec["r"])[index]
+    if prep.supply is not None:          # the recorded supply pressure, sample by sample
+        d[row["use_p_s"]], d[row["p_s_m"]] = 1.0, prep.supply[index]
     inst = prep.control_instants()
     if step > 1:          # a controller instant anywhere within the step
         inst = np.convolve(inst.astype(float), np.ones(step), mode="full")[step - 1:]
@@ -157,9 +159,8 @@ def _base_inputs(prep: Prepared, index: np.ndarray, step: int = 1) -> np.ndarray
 
 def _sigma(prep: Prepared) -> dict[str, float]:
     sig = {"x": max(prep.noise["x"], 1e-6 * prep.plant.stroke)}
-    if prep.has_pressures:
-        sig["p_a"] = max(prep.noise["p_a"], 10.0)
-        sig["p_b"] = max(prep.noise["p_b"], 10.0)
+    for side in prep.pressures:
+        sig[side] = max(prep.noise[side], 10.0)
     return sig
 
 
@@ -209,7 +210,7 @@ def horizons(prep: Prepared, horizon: float = HORIZON, coverage: float | None = 
     row = {k: i for i, k in enumerate(INPUT_ROWS)}
     pos = np.arange(len(starts)) * hs
     d[row["anchor"], pos] = 1.0
-    if prep.has_pressures:
+    if prep.pressures:
         d[row["anchor_p"], pos] = 1.0
     # hidden states: from rest at the first window, then carried over (when windows
     # are contiguous) or reset to rest (after a gap)
@@ -247,7 +248,7 @@ def segments(prep: Prepared, length: float = SEGMENT, decimate: int = 2,
     row = {k: i for i, k in enumerate(INPUT_ROWS)}
     pos = (starts - starts[0]) // step
     d[row["anchor"], pos] = 1.0
-    if prep.has_pressures:
+    if prep.pressures:
         d[row["anchor_p"], pos] = 1.0
     d[row["anchor_hidden"], pos] = 1.0
     d[row["closed_loop"]] = 1.0 if prep.closed else 0.0

@@ -100,8 +100,8 @@ class CandidateModel:
                              substeps=substeps_for(h))
         self.p0 = self.plant.p0.copy()
         x0 = float(np.clip(prep.xs[0], 0.0, self.plant.stroke))
-        if prep.has_pressures:
-            self.z0 = self.plant.initial_state(x0, p_a=float(prep.pas[0]), p_b=float(prep.pbs[0]),
+        if prep.pressures:
+            self.z0 = self.plant.initial_state(x0, **prep.first_pressures(),
                                                u0=float(prep.rec["u"][0]))
         else:
             self.z0 = self.plant.initial_state(x0)

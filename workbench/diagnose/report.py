@@ -27,7 +27,8 @@ def build_report(d) -> rp.Report:
                 _replay_section(d),
                 _signatures_section(d), _candidates_section(d)]
     title = "Mismatch diagnosis"
-    return rp.Report(title, subtitle=f"{Path(d.recording_file).name} on {Path(d.plant_file).name}",
+    recs = " + ".join(Path(r).name for r in d.recording_file.split(" + "))
+    return rp.Report(title, subtitle=f"{recs} on {Path(d.plant_file).name}",
                      status=_status(d), sections=sections,
                      provenance=rp.provenance(plant_file=d.plant_file if Path(d.plant_file).exists()
                                               else None,
@@ -69,6 +70,18 @@ def _summary_section(d) -> rp.Section:
     blocks.append(rp.Table(cols, fit_rows, units=[""] + ["%"] * (len(cols) - 1),
                            caption="Fit (100 (1 - ||y - y_model|| / ||y - mean y||)) of the "
                                    "replay, per signal, before and after each finding"))
+    if len(d.recordings) > 1:
+        sig = list(d.fit_before)
+        blocks.append(rp.Table(
+            ["recording", "from", "duration"] + [f"{s} before" for s in sig]
+            + [f"{s} after" for s in sig],
+            [[Path(r["recording"]).name, r["start_s"], r["duration_s"]]
+             + [r["fit_before"].get(s) for s in sig] + [r["fit_after"].get(s) for s in sig]
+             for r in d.recordings],
+            units=["", "s", "s"] + ["%"] * (2 * len(sig)),
+            caption="Several recordings diagnosed together (one model for all): the fit of "
+                    "each, before and after the findings ('from': where it starts on the "
+                    "joined time axis of the figures)"))
     for n in d.notes:
         blocks.append(rp.Status("NOTE", n))
     return rp.Section("Summary", blocks)
