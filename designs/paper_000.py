@@ -403,7 +403,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
 def _dead_volume_and_friction(cal: dict, setup: dict, quick: bool) -> Plant:
     """Dead volumes from Table II's w0 band, then the friction-deadband family on Table
     I's DC gain, Fig. 6's 1 V step held throughout; the family's point nearest Table I
-    is the calibrated rig (:mod:`paper_000_calib`). Fills ``cal`` and returns the rig."""
+    and Fig. 6 together is the calibrated rig (:mod:`paper_000_calib`). Fills ``cal`` and returns the rig."""
     fitted = cal["result"].plant_
     v_target = step_velocity(fitted)[2]
     cal["v_target"] = v_target
@@ -411,14 +411,25 @@ def _dead_volume_and_friction(cal: dict, setup: dict, quick: bool) -> Plant:
         fitted, spring_w0_zeta, fig6_dead_volume_fit(fig6_record(fitted), setup))
     rig0 = hold_fig6(cal["dead_volume"]["plant"], v_target, step_velocity)
     tools = {"step_velocity": step_velocity, "estimate_deadband": estimate_deadband,
-             "experiment": experiment, "staircase": staircase}
+             "experiment": experiment, "staircase": staircase,
+             "fig6_distance": lambda pl: fig6_distance(pl, fig6_record(fitted))}
     committed = Plant.from_toml(CALIBRATED) if CALIBRATED.exists() else None
     fam = friction_family(rig0, setup, quick, v_target, tools,
                           estimate_deadband(rig0, setup, quick), friction_grid(quick, committed))
     ok = [r for r in fam if r["bracketed"]] or fam
-    best = min(ok, key=lambda r: r["distance"])
+    best = min(ok, key=lambda r: r["score"])
     cal["friction"], cal["friction_choice"], cal["deadband"] = fam, best, best["db"]
     return best["db"]["plant"]
+
+
+def fig6_distance(plant: Plant, record: Recording) -> float:
+    """RMS of the 1 V step's velocity (:func:`step_velocity`, 1 ms) minus the Fig. 6
+    record over the 0.3 s after the step, in the record's standard deviation
+    (``FIG6_V_STD``, the paper's one digit), -."""
+    t, v, _ = step_velocity(plant)
+    d = record.data
+    v_rec = np.interp(t, np.asarray(d["t"]) - 0.05, np.asarray(d["v"]))
+    return float(np.sqrt(np.mean((v - v_rec) ** 2)) / FIG6_V_STD)
 
 
 def _calibration_extras(cal: dict) -> dict:

@@ -8,9 +8,10 @@
   help: the grey-box estimator's interval for V0 fitted to it is reported as measured.
 * Dry friction vs deadband: Table I's DC gain is one number; every Coulomb friction
   F_c on a grid gets the deadband that gives the DC gain (with its 95 % interval), the
-  valve re-sized so that Fig. 6's 1 V step is unchanged. The family is the interval of
-  the combination; the point whose re-identified ARX lies closest to Table I (the same
-  criterion as the supply convention) goes into the plant file.
+  valve re-sized so that Fig. 6's 1 V step keeps its velocity. The family is the
+  interval of the combination; the point nearest both measurements (Table I's
+  coefficients and Fig. 6's curve, each as an RMS in standard deviations) goes into the
+  plant file.
 """
 
 from __future__ import annotations
@@ -152,9 +153,11 @@ def friction_family(rig0: Plant, setup: dict, quick: bool, v_target: float, tool
     """For each Coulomb friction F_c of the grid: the valve re-held on Fig. 6, the DC
     gain with friction alone (no deadband), the deadband that gives Table I's DC gain
     with its 95 % interval, and at that point the re-identified dominant pole, the
-    distance to Table I and the P loop's steady-state error. ``at_zero`` is the
-    deadband estimate without friction (reused); ``tools`` holds paper_000's
-    step_velocity, estimate_deadband, experiment and staircase."""
+    distance to Table I, the distance to Fig. 6 (``tools["fig6_distance"]``), their
+    root sum of squares ("score": both are RMS residuals in standard deviations) and
+    the P loop's steady-state error. ``at_zero`` is the deadband estimate without
+    friction (reused); ``tools`` holds paper_000's step_velocity, estimate_deadband,
+    experiment, staircase and fig6_distance."""
     rows = []
     for fc in grid:
         if fc == 0.0:
@@ -171,11 +174,14 @@ def friction_family(rig0: Plant, setup: dict, quick: bool, v_target: float, tool
                      "sonic_conductance": float(db["plant"].params["valve.sonic_conductance"]),
                      "pole": dominant(ex["model"].poles),
                      "distance": table1_distance(ex["model"]), "sse": float(np.mean(sse)),
+                     "fig6": tools["fig6_distance"](db["plant"]),
                      "plant": db["plant"], "db": db})
         r = rows[-1]
+        r["score"] = float(np.hypot(r["distance"], r["fig6"]))
         print(f"    F_c = {fc:g} N: friction alone DC {r['dc_friction_alone']:.4f}; deadband "
               f"{r['deadband']:.4f} [{r['ci95'][0]:.4f}, {r['ci95'][1]:.4f}], |z|dom "
-              f"{abs(r['pole']):.4f}, Table I distance {r['distance']:.2f}, "
+              f"{abs(r['pole']):.4f}, Table I distance {r['distance']:.2f}, Fig. 6 distance "
+              f"{r['fig6']:.2f}, "
               f"error {r['sse'] * 1e3:.1f} mm")
     return rows
 
@@ -196,7 +202,7 @@ def calibrated_toml(rig: Plant, cal: dict) -> str:
                 f"coulomb = {best['coulomb']:.1f}                   # N: Table I's DC gain fixes "
                 "only the friction-deadband family;\n"
                 "                                  # this is its point nearest Table I's "
-                "dynamics (designs/paper_000.py)\n"
+                "coefficients and Fig. 6's curve (paper_000.py)\n"
                 f"static = {best['static']:.1f}                    # N: ASSUMED ratio\n"
                 f"stribeck_velocity = {STRIBECK:g}          # m/s: ASSUMED\n")
     lo_w, _, hi_w = dv["w0_band"]

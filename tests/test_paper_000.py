@@ -326,7 +326,8 @@ def test_friction_and_deadband_are_one_combination(run):
     DC gain being the same), and friction alone (no overlap) leaves the DC gain above
     Table I's central 0.984 by more than one std of its rounding (0.005; it may enter the
     95 % band, which the report says). The calibrated rig is the family's point nearest
-    Table I."""
+    Table I and Fig. 6 together: the root sum of squares of the two distances (both RMS
+    residuals in standard deviations), recomputed here."""
     c = run[1]["calibration"]
     fam = c["friction_family"]
     assert len(fam) >= 2 and fam[0]["coulomb"] == 0.0
@@ -334,6 +335,7 @@ def test_friction_and_deadband_are_one_combination(run):
     assert all(b > a for a, b in zip(d, d[1:]))
     dc_hi = TABLE1_B1 / (1 + sum(TABLE1_A)) + 0.005
     assert all(r["dc_friction_alone"] > dc_hi for r in fam)
-    best = min((r for r in fam if r["bracketed"]), key=lambda r: r["distance"])
+    best = min((r for r in fam if r["bracketed"]),
+               key=lambda r: np.hypot(r["distance"], r["fig6"]))
     assert c["friction_choice"] == best["coulomb"]
     assert c["deadband"] == pytest.approx(best["deadband"])
