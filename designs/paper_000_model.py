@@ -19,11 +19,11 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 
 
-PLANT = HERE / "plants" / "situm_rodless.toml"
+PLANT = HERE / "plants" / "situm_rodless_nominal.toml"
 
 
 #: The calibrated plant a full run writes (copied here from DIR/situm_rodless.calibrated.toml).
-CALIBRATED = HERE / "plants" / "papers" / "situm_rodless_calibrated.toml"
+CALIBRATED = HERE / "plants" / "situm_rodless.toml"
 
 
 TITLE = "Paper 000 reproduced: calibrated rodless rig, Table I re-identified"

@@ -37,7 +37,7 @@ from workbench.params import atomic_write_text
 from workbench.stability import maps
 
 HERE = Path(__file__).resolve().parent
-PLANT = HERE / "plants" / "situm_rodless.toml"
+PLANT = HERE / "plants" / "situm_rodless_nominal.toml"
 ROOT = HERE.parent
 TITLE = "P and PD position loops, 15 mm rodless rig (paper 000)"
 

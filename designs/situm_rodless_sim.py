@@ -24,7 +24,7 @@ from workbench.params import atomic_write_text
 from workbench.plots import trajectory_figure
 
 HERE = Path(__file__).resolve().parent
-PLANT = HERE / "plants" / "situm_rodless.toml"
+PLANT = HERE / "plants" / "situm_rodless_nominal.toml"
 
 
 def main(argv=None) -> int:

@@ -14,7 +14,7 @@ from workbench.__main__ import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANT = ROOT / "designs" / "plants" / "rig25_mpye.toml"
-SITUM = ROOT / "designs" / "plants" / "situm_rodless.toml"
+SITUM = ROOT / "designs" / "plants" / "situm_rodless_nominal.toml"
 
 
 def test_check_prints_summary(capsys):

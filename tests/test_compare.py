@@ -12,7 +12,7 @@ from workbench.errors import InputError
 from workbench.physics.gas import RHO_ANR
 from workbench.simulate import Trajectory, steps
 
-PLANT = "designs/plants/situm_rodless.toml"
+PLANT = "designs/plants/situm_rodless_nominal.toml"
 T = 0.01                      # control period of the synthetic runs, s
 
 

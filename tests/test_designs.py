@@ -88,7 +88,7 @@ def test_failed_design_still_writes_a_report(tmp_path, monkeypatch):
 
 
 # --------------------------------------------------------------- situm_rodless_sim
-# Paper 000 rig (designs/plants/situm_rodless.toml), recomputed by hand here.
+# Paper 000 rig (designs/plants/situm_rodless_nominal.toml), recomputed by hand here.
 SITUM = dict(ps=5e5, patm=101325.0, b=0.30, C=6.23e-9, T=293.15, bore=0.015, L=0.5,
              Vd=2e-6, M=0.91, kf=65.0, kappa=1.4, span=5.0, kp=10.0)
 RHO0, R_AIR = 1.185, 287.0                 # physics.md: ISO 6358 rho0 at T0; air
@@ -498,7 +498,7 @@ def test_rodless_sim_remaining_keys(rodless_sim):
     fit and band, the pressure range from the CSV, the wall time."""
     _, out, s = rodless_sim
     d = pd.read_csv(out / "trajectory.csv", comment="#")
-    assert s["plant"] == "designs/plants/situm_rodless.toml" and s["operating_point"]["x"] == 0.25
+    assert s["plant"] == "designs/plants/situm_rodless_nominal.toml" and s["operating_point"]["x"] == 0.25
     lin = s["exact_linearisation"]
     assert 0.0 <= lin["fit_error"] < 1e-9          # an exact reduction (symmetric, mid stroke)
     lo, hi = lin["band_rad_s"]

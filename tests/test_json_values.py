@@ -20,7 +20,7 @@ from workbench.__main__ import main
 from conftest import central_jacobian, write_plant
 
 ROOT = Path(__file__).resolve().parents[1]
-SITUM = ROOT / "designs" / "plants" / "situm_rodless.toml"
+SITUM = ROOT / "designs" / "plants" / "situm_rodless_nominal.toml"
 RIG25 = ROOT / "designs" / "plants" / "rig25_mpye.toml"
 REC = ROOT / "tests" / "data" / "recordings" / "step_small.csv"
 RHO_ANR = 1.185          # kg/m^3 at 20 degC, 1 bar (physics.md, ISO 6358 datasheet form)

@@ -23,7 +23,7 @@ from workbench import InputError, Plant, WorkbenchError, controllers, linearize,
 from workbench.__main__ import main
 
 ROOT = Path(__file__).resolve().parents[1]
-SITUM = ROOT / "designs" / "plants" / "situm_rodless.toml"
+SITUM = ROOT / "designs" / "plants" / "situm_rodless_nominal.toml"
 
 # Table II of paper 000
 W0, ZETA, T, K0 = 32.97, 1.1, 0.01, 7.0

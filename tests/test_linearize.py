@@ -16,7 +16,7 @@ PLANTS = Path(__file__).resolve().parents[1] / "designs" / "plants"
 
 @pytest.fixture(scope="module")
 def situm():
-    return Plant.from_toml(PLANTS / "situm_rodless.toml")
+    return Plant.from_toml(PLANTS / "situm_rodless_nominal.toml")
 
 
 def test_paper000_formulas_reproduce_table_ii():

@@ -14,7 +14,7 @@ from workbench.controllers import PID
 from workbench.errors import InputError
 from workbench.stability import maps
 
-SITUM = "designs/plants/situm_rodless.toml"
+SITUM = "designs/plants/situm_rodless_nominal.toml"
 RIG25 = "designs/plants/rig25_mpye.toml"
 
 

@@ -11,7 +11,7 @@ from workbench.errors import InputError
 from workbench.robustness import DEFAULT_UNCERTAINTY, Uncertainty, draw_plants, monte_carlo
 from workbench.simulate import steps
 
-PLANT = "designs/plants/situm_rodless.toml"
+PLANT = "designs/plants/situm_rodless_nominal.toml"
 
 
 def _wilson(k: int, n: int, z: float | None = None) -> tuple[float, float]:

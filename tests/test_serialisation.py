@@ -112,7 +112,7 @@ def _round_trip(obj) -> dict:
 
 @pytest.fixture(scope="module")
 def situm():
-    return Plant.from_toml(PLANTS / "situm_rodless.toml")
+    return Plant.from_toml(PLANTS / "situm_rodless_nominal.toml")
 
 
 def test_linear_models_and_gain_limits_to_dict(situm):

@@ -20,7 +20,7 @@ PLANTS = Path(__file__).resolve().parents[1] / "designs" / "plants"
 
 @pytest.fixture(scope="module")
 def situm():
-    return Plant.from_toml(PLANTS / "situm_rodless.toml")
+    return Plant.from_toml(PLANTS / "situm_rodless_nominal.toml")
 
 
 def synthetic(t, x, u=None, p_a=None, p_b=None, reference=None) -> simulate.Trajectory:

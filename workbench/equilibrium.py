@@ -11,7 +11,7 @@ delegate :meth:`workbench.plant.Plant.initial_state` here without an import circ
 Examples
 --------
 >>> from workbench import Plant, equilibrium
->>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+>>> plant = Plant.from_toml("designs/plants/situm_rodless_nominal.toml")
 >>> op = equilibrium.operating_point(plant, x=0.25)
 >>> x0 = equilibrium.initial_state(plant, 0.25)
 >>> op.u, round(op.p_a / 1e5, 3), round(op.p_b / 1e5, 3)   # V, bar: symmetric at mid-stroke

@@ -10,7 +10,7 @@ never from finite differences.
 Examples
 --------
 >>> from workbench import Plant, linearize
->>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+>>> plant = Plant.from_toml("designs/plants/situm_rodless_nominal.toml")
 >>> op = linearize.operating_point(plant, x=0.25)
 >>> lin = linearize.tangent(plant, op)
 >>> red = linearize.reduced_position_model(lin)

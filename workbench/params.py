@@ -9,8 +9,8 @@ Examples
 --------
 >>> from workbench.params import PlantParams
 >>> params = PlantParams.from_toml("designs/plants/situm_rodless.toml")
->>> params.effects
-()
+>>> params.effects                 # paper 000's rig as calibrated (designs/paper_000.py)
+('dry_friction', 'valve_deadband')
 
 Valve law (extra optional keys; formats.md defines none, so files without them load
 unchanged and describe the four-edge ISO 6358 valve)::

@@ -13,7 +13,7 @@ by a jump). Each segment gets its metrics; each check judges the worst segment.
 Examples
 --------
 >>> from workbench import Plant, controllers, validate
->>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+>>> plant = Plant.from_toml("designs/plants/situm_rodless_nominal.toml")
 >>> v = validate.validate(plant, controllers.from_plant(plant))
 >>> v.passed, [c.name for c in v.failed]
 (False, ['overshoot'])
@@ -651,10 +651,10 @@ def validate(plant, controller=None, spec: Specification | None = None,
     Examples
     --------
     >>> from workbench import Plant, controllers
-    >>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+    >>> plant = Plant.from_toml("designs/plants/situm_rodless_nominal.toml")
     >>> v = validate(plant, controllers.from_plant(plant))
     >>> print(v.summary().splitlines()[0])
-    situm-rodless-15mm: P (kp = 10): FAILED
+    situm-rodless-15mm-nominal: P (kp = 10): FAILED
     """
     if controller is None:
         from .controllers import from_plant

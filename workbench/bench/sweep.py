@@ -41,7 +41,7 @@ def bench(quick: bool = False) -> dict:
     from ..plant import Plant
     from ..stability.maps import Axis, stability_map
     from .baselines_sweep import batched_rho, pointwise_rho
-    plant = Plant.from_toml(ROOT / "designs" / "plants" / "situm_rodless.toml")
+    plant = Plant.from_toml(ROOT / "designs" / "plants" / "situm_rodless_nominal.toml")
     n = 60 if quick else 200
     xa = Axis.linspace("position", 0.05, 0.45, n)
     ya = Axis.linspace("supply.pressure", 3e5, 7e5, n)

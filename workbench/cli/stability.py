@@ -69,7 +69,7 @@ def _register_limits(subparsers) -> None:
 def _register_map(subparsers) -> None:
     mp = subparsers.add_parser(
         "map", help="stability map over two swept parameters", description=MAP_DESCRIPTION,
-        epilog=EPILOG + " Example: workbench map designs/plants/situm_rodless.toml "
+        epilog=EPILOG + " Example: workbench map designs/plants/situm_rodless_nominal.toml "
                         "--x-axis k0=1:90:100 --y-axis mass=0.3:5:100 --out map/")
     mp.add_argument("plant", metavar="PLANT.toml", help="plant file")
     mp.add_argument("--x-axis", required=True, metavar="NAME=START:STOP[:NUM]",

@@ -22,7 +22,7 @@ Examples
 --------
 >>> from workbench import Plant
 >>> from workbench.stability import maps
->>> plant = Plant.from_toml("designs/plants/situm_rodless.toml")
+>>> plant = Plant.from_toml("designs/plants/situm_rodless_nominal.toml")
 >>> m = maps.stability_map(plant, maps.Axis.linspace("kp", 1, 40, 100),
 ...                        maps.Axis.linspace("load.mass", 0.5, 5, 100))
 >>> round(float(m.stable.mean()), 2)             # share of the (kp, mass) grid that is stable
