@@ -6,21 +6,26 @@ a pneumatic servo-distributor for simulation and nonlinear control" on the workb
 1. a 3/2 flow stage like the paper's Servotronic (two ISO 6358 restrictions with a
    rounded underlap, 7 bar abs supply, exhaust to atmosphere), calibrated so that its
    centred port rests at the paper's 5.1e5 Pa (section 5), measured on a grid with noise
-   (:class:`workbench.identify.valve.FlowStage`);
+   (:class:`workbench.identify.valve.FlowStage`), and its pressure gain characteristic
+   measured as a flow bench does (port blocked: q = 0 exactly, p_e read by a pressure
+   transducer; the paper's Fig. 3d);
 2. approximation I (n = 5, m = 10: 66 coefficients; and n = m = 5 as the paper's
    comparison) and approximation II (the paper's 15 coefficients: one psi for both flow
-   directions; and the two-branch form, with phi fitted freely or from the centred column),
-   with the paper's accuracy figures R and g/s;
+   directions; and the two-branch form), each through the blocked-port points, and the
+   same fits on the flow points alone (what made the tank and tangent errors), with the
+   paper's accuracy figures R and g/s;
 3. the pressure gain characteristic q_m(p_e, u) = 0 of each law against the true valve;
-4. the closed 1 l tank (k = 1.2) after +-1 V and +-0.1 V steps at u_e = 0 V, with the
+4. the closed 1 l tank (k = 1.2) after +-1 V and +-0.1 V steps at u_e = 0 V (and
+   +-0.05, +-0.25 V: commands between the measured ones), with the
    errors against the true valve, and a measured decomposition of the end-pressure error
    (flow error at the end divided by the tank's restoring slope Cp there);
 5. the tangent model (Cp, Gu, tau, G) of every approximation beside the true valve's,
    with the reason where it is poor.
 
 Writes ``DIR/report.html`` and ``report.pdf`` (first table: paper value | workbench
-value | how obtained | agrees?), ``summary.json`` (``paper_results``) and
-``valve_table.csv`` (the measured table, re-fittable with ``workbench identify valve``).
+value | how obtained | agrees?), ``summary.json`` (``paper_results``),
+``valve_table.csv`` and ``pressure_gain.csv`` (the measured table and blocked-port
+points, re-fittable with ``workbench identify valve TABLE --pressure-gain PG``).
 
 Usage: python designs/paper_003.py [--quick] [--out DIR]
 """
@@ -46,46 +51,65 @@ TITLE = "Paper 003: flow stage of a 3/2 servo-distributor, approximations I and 
 #: Paper 003's numbers, each with where it is stated.
 PAPER = {
     "p_e": (5.1, "bar", "sect. 5: equilibrium pressure 5.1 10^5 Pa at u = 0 V"),
-    "coef_I": (66, "-", "sect. 4.2: (n+1)(m+1) = 66 for n = 5, m = 10"),
+    "coef_I": (66, "coefficients", "sect. 4.2: (n+1)(m+1) = 66 for n = 5, m = 10"),
     "R_I": (0.99, "-", "sect. 4.2: R = 0.99 for all approximations I"),
     "err_I": (0.4, "g/s", "sect. 4.2, Fig. 4b: errors less than +-0.4 g/s"),
-    "coef_II": (15, "-", "sect. 4.3: (n+1)+(m+1)+(l+1) = 15 for degrees 5, 5, 2"),
+    "coef_II": (15, "coefficients", "sect. 4.3: (n+1)+(m+1)+(l+1) = 15 for degrees 5, 5, 2"),
     "R_II": (0.99, "-", "sect. 4.3: R = 0.99"),
     "err_II": (0.5, "g/s", "sect. 4.3, Fig. 6b: errors less than +-0.5 g/s"),
     "tank_I": (2.0, "%", "sect. 5, Figs. 9-10: approximation I pressure error less than 2 %"),
-    "points": (201, "-", "sect. 4.2: the table of experimental points contains 201 values"),
+    "points": (201, "points", "sect. 4.2: the table of experimental points contains 201 values"),
     "volume": (1e-3, "m^3", "sect. 5, Fig. 7: closed tank '(11)' read as 1 l"),
     "k": (1.2, "-", "sect. 5: polytropic coefficient k = 1.2"),
 }
 #: Assumptions where the paper is silent (stated in the report).
 ASSUMED = {"supply_pressure": 7.0e5, "inlet_conductance": 1.0e-8,
            "critical_pressure_ratio": 0.3, "underlap": 0.1, "command_span": 10.0,
-           "noise_kg_s": 0.05e-3}
+           "noise_kg_s": 0.05e-3, "pressure_noise_Pa": 1e3, "gain_margin": 0.05}
 #: A tangent-model quantity is "poor" when it is off by more than this fraction: the
 #: tank's time constant and gain then differ visibly on a step (paper Fig. 10).
 TANGENT_TOL = 0.2
 STEPS = (1.0, -1.0, 0.1, -0.1)
+#: Steps to commands that are not among the blocked-port points (the check that the
+#: pressure gain constraints do not just return their own measurements).
+BETWEEN = (0.25, -0.25, 0.05, -0.05)
+I_LAW, II_LAW = "I (n=5, m=10)", "II, two psi"
+I_FLOW, II_FLOW = "I (n=5, m=10), flow points only", "II, two psi, flow points only"
 
 
 def build_table(quick: bool):
-    """The flow stage and its measured table (21 commands denser near 0 V x 10 pressures)."""
-    stage = vf.FlowStage.calibrated(PAPER["p_e"][0] * 1e5, **{k: v for k, v in ASSUMED.items()
-                                                         if k != "noise_kg_s"})
+    """The flow stage, its measured table (21 commands denser near 0 V x 10 pressures) and
+    the blocked-port pressure at the same commands (inside 5 % of the range's ends)."""
+    stage = vf.FlowStage.calibrated(PAPER["p_e"][0] * 1e5, **{
+        k: v for k, v in ASSUMED.items()
+        if k not in ("noise_kg_s", "pressure_noise_Pa", "gain_margin")})
     u = vf.centre_dense_commands(0.0, stage.command_span, 21)
     p = vf.chebyshev_pressures(stage.atmospheric_pressure, stage.supply_pressure, 10)
     table = stage.table(u, p, noise=ASSUMED["noise_kg_s"], seed=3,
                         made_with="designs/paper_003.py (FlowStage.calibrated(5.1e5), seed 3)")
-    return stage, table
+    blocked = stage.blocked_port(u, margin=ASSUMED["gain_margin"],
+                                 noise=ASSUMED["pressure_noise_Pa"], seed=3)
+    return stage, table, blocked
 
 
-def fit_all(table, quick: bool) -> dict:
-    """Every approximation of the report, by label."""
-    fits = {"I (n=5, m=10)": vf.fit_polynomial(table, 5, 10),
+def write_pressure_gain(path: Path, blocked) -> None:
+    """The blocked-port points as CSV (header u,p), re-readable by the CLI."""
+    lines = ["# blocked-port pressure gain points of designs/paper_003.py: q_m = 0 at (u, p)",
+             "# u in V, p in Pa absolute (pressure transducer noise 1e3 Pa, seed 3)", "u,p"]
+    lines += [f"{float(u)!r},{float(p)!r}" for u, p in blocked]
+    atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def fit_all(table, blocked, quick: bool) -> dict:
+    """Every approximation of the report, by label: through the blocked-port points, and
+    the two main ones on the flow points alone (the cause of the tank and tangent errors)."""
+    fits = {I_LAW: vf.fit_polynomial(table, 5, 10, pressure_gain=blocked),
             "II, 15 coef. (one psi)": vf.fit_affine(table, 5, 5, 2, shared_psi=True),
-            "II, two psi, phi fitted": vf.fit_affine(table, 5, 5, 2),
-            "II, two psi, phi from centre": vf.fit_affine(table, 5, 5, 2, phi_from="centre")}
+            II_LAW: vf.fit_affine(table, 5, 5, 2, pressure_gain=blocked),
+            I_FLOW: vf.fit_polynomial(table, 5, 10),
+            II_FLOW: vf.fit_affine(table, 5, 5, 2)}
     if not quick:
-        fits["I (n=m=5)"] = vf.fit_polynomial(table, 5, 5)
+        fits["I (n=m=5)"] = vf.fit_polynomial(table, 5, 5, pressure_gain=blocked)
     return fits
 
 
@@ -139,6 +163,7 @@ def end_error_budget(tank, stage, fits) -> list[dict]:
 def tangent_rows(tank, stage_phi_slope, fits) -> tuple[list, dict]:
     """Tangent model of each law at (p_e, u_e = 0) and, where poor, the measured reason."""
     true = tank.steps[("true valve", 1.0)].tangent
+    tangents = {lab: tank.steps[(lab, 1.0)].tangent for lab in fits}
     rows, reasons = [], {}
     for lab in ["true valve", *fits]:
         tn = tank.steps[(lab, 1.0)].tangent
@@ -151,17 +176,17 @@ def tangent_rows(tank, stage_phi_slope, fits) -> tuple[list, dict]:
                      "reference" if lab == "true valve" else
                      f"tau x{r_tau:.2f}, G x{r_g:.2f}" + (" (poor)" if poor else "")])
         if poor:
-            reasons[lab] = _tangent_reason(lab, fits[lab], tn, true, stage_phi_slope)
+            reasons[lab] = _tangent_reason(lab, fits[lab], tn, true, stage_phi_slope, tangents)
     return rows, reasons
 
 
-def _tangent_reason(lab, fit, tn, true, centre_slope) -> str:
+def _tangent_reason(lab, fit, tn, true, centre_slope, tangents) -> str:
     if "one psi" in lab:
         return (f"{lab}: one psi for both flow directions cannot be zero at supply (inlet) and "
                 f"at atmosphere (exhaust) at once; its whole characteristic is off (R = "
                 f"{fit.quality.r:.3f}), and with it Cp = {tn.cp:.3g} kg/(s Pa) against "
                 f"{true.cp:.3g}.")
-    if "phi fitted" in lab:
+    if lab == II_FLOW:
         import casadi as ca
         p = ca.SX.sym("p")
         phi = sum(c * (p / 1e5) ** k for k, c in enumerate(fit.phi))
@@ -171,8 +196,10 @@ def _tangent_reason(lab, fit, tn, true, centre_slope) -> str:
                 f"{slope:.3g} kg/(s Pa), while the centred column of the table falls with "
                 f"{centre_slope:.3g} kg/(s Pa) there (the true Cp is {true.cp:.3g}). The "
                 "underlap leakage of a real spool vanishes as it opens, a phi identical for all "
-                "u (paper 003) cannot follow that. Fitting phi to the centred column "
-                "('phi from centre') restores Cp, hence tau.")
+                "u (paper 003) cannot follow that, and flow readings near zero flow do not "
+                "fix a slope. Through the blocked-port points the zero crossings along p_e(u) "
+                "are fixed, so Cp = Gu / (dp_e/du) follows from the well-measured Gu: row "
+                f"'{II_LAW}' has tau {tangents[II_LAW].tau:.2f} s against {true.tau:.2f} s.")
     return (f"{lab}: Cp {tn.cp:.3g} against {true.cp:.3g} kg/(s Pa), Gu {tn.gu:.3g} against "
             f"{true.gu:.3g} kg/(s V): the polynomial's slopes at the narrow pressure gain "
             "region are set by the points around it.")
@@ -189,22 +216,25 @@ def centre_column_slope(table, p_e: float) -> float:
 
 def paper_rows(stage, table, fits, tank, gains_cmp, full_cmp) -> list[dict]:
     """The first table: one entry per paper result."""
-    i, ii15, ii = fits["I (n=5, m=10)"], fits["II, 15 coef. (one psi)"], fits["II, two psi, phi fitted"]
-    iic = fits["II, two psi, phi from centre"]
-    tank_i = {du: 100 * tank.max_error("I (n=5, m=10)", du) for du in STEPS}
+    i, ii15, ii = fits[I_LAW], fits["II, 15 coef. (one psi)"], fits[II_LAW]
+    tank_i = {du: 100 * tank.max_error(I_LAW, du) for du in tank.step_sizes()}
 
     def row(key, result, value, how, agrees, unit=None):
         pv, pu, src = PAPER[key]
         return {"result": result, "paper": pv, "workbench": value, "unit": unit or pu,
                 "source": src, "how": how, "agrees": bool(agrees)}
+    small, large = max(tank_i[0.1], tank_i[-0.1]), max(tank_i[1.0], tank_i[-1.0])
+    between = max(tank_i[du] for du in BETWEEN)
     up = max(tank_i[1.0], tank_i[0.1])
     down = max(tank_i[-1.0], tank_i[-0.1])
+    p_e = tank.steps[("true valve", 1.0)].p_e
     rows = [
-        row("p_e", "equilibrium of the centred port", float(tank.steps[("true valve", 1.0)].p_e) / 1e5,
+        row("p_e", "equilibrium of the centred port", float(p_e) / 1e5,
             "an input: the flow stage is calibrated to it (exhaust conductance), then "
-            "q(p_e, 0) = 0 solved by Brent", abs(tank.steps[("true valve", 1.0)].p_e - 5.1e5) < 500),
-        row("points", "points of the measured table", len(table),
-            "21 commands (denser near 0 V) x 10 Chebyshev pressures", abs(len(table) - 201) < 20),
+            "q(p_e, 0) = 0 solved by Brent", abs(p_e - 5.1e5) < 500),
+        row("points", "points of the measured table", len(table) + len(i.pressure_gain),
+            f"21 commands (denser near 0 V) x 10 Chebyshev pressures + {len(i.pressure_gain)} "
+            "blocked-port points", abs(len(table) + len(i.pressure_gain) - 201) < 20),
         row("coef_I", "approximation I coefficients", paper_count(i), "fit_polynomial(5, 10)",
             paper_count(i) == 66),
         row("R_I", "approximation I, R", i.quality.r, "sqrt(1 - SS_res/SS_tot) on the table",
@@ -212,7 +242,9 @@ def paper_rows(stage, table, fits, tank, gains_cmp, full_cmp) -> list[dict]:
         row("err_I", "approximation I, largest flow error", i.quality.max_error_g_s,
             "max |q_fit - q_table|, table noise 0.05 g/s", i.quality.max_error_g_s <= 0.4),
         row("coef_II", "approximation II coefficients", paper_count(ii15),
-            "fit_affine(5, 5, 2, shared_psi=True): phi 6 + psi 6 + Gamma 3 (constant 0)",
+            "fit_affine(5, 5, 2, shared_psi=True) on the flow points (R is a flow criterion; "
+            "through the blocked-port points it is lower still): phi 6 + psi 6 + Gamma 3 "
+            "(constant 0)",
             paper_count(ii15) == 15),
         row("R_II", "approximation II (15 coef.), R", ii15.quality.r, "as for I",
             ii15.quality.r >= 0.99),
@@ -222,20 +254,20 @@ def paper_rows(stage, table, fits, tank, gains_cmp, full_cmp) -> list[dict]:
             "fit_affine(5, 5, 2): inlet and exhaust psi", ii.quality.r >= 0.99),
         row("err_II", "approximation II (two psi), largest flow error", ii.quality.max_error_g_s,
             "as for I", ii.quality.max_error_g_s <= 0.5),
-        row("err_II", "approximation II (two psi, phi from centre), largest flow error",
-            iic.quality.max_error_g_s, "phi fitted to the centred column, then held",
-            iic.quality.max_error_g_s <= 0.5),
-        row("tank_I", "approximation I tank error, upward steps (+1, +0.1 V)", up,
-            "max |p_I - p_true| / p_true over the run", up <= 2.0),
-        row("tank_I", "approximation I tank error, downward steps (-1, -0.1 V)", down,
-            "as above; see the section on downward steps", down <= 2.0),
+        row("tank_I", "approximation I tank error, +-0.1 V steps (Fig. 10)", small,
+            "max |p_I - p_true| / p_true over the run", small <= 2.0),
+        row("tank_I", "approximation I tank error, +-1 V steps (Fig. 9)", large,
+            "as above; see the section on the tank steps", large <= 2.0),
+        row("tank_I", "approximation I tank error, steps between the measured commands",
+            between, "+-0.05 and +-0.25 V: no blocked-port point at the new command",
+            between <= 2.0),
     ]
     rows.append({"result": "tank errors smaller for u > 0 (approximation I)", "paper": "yes",
                  "workbench": "yes" if up < down else "no", "unit": "-",
                  "source": "sect. 5, Fig. 9: 'the errors are smaller for u > 0'",
-                 "how": "largest error of the upward against the downward steps",
-                 "agrees": bool(up < down)})
-    c1, c2 = full_cmp["I (n=5, m=10)"], full_cmp["II, two psi, phi fitted"]
+                 "how": f"largest error of the upward ({up:.2f} %) against the downward "
+                        f"({down:.2f} %) steps", "agrees": bool(up < down)})
+    c1, c2 = full_cmp[I_LAW], full_cmp[II_LAW]
     e1 = 0.5 * (c1["median_rel_cp"] + c1["median_rel_gu"])
     e2 = 0.5 * (c2["median_rel_cp"] + c2["median_rel_gu"])
     rows.append({"result": "Cp, Gu along p_e(u): II closer to the true valve than I",
@@ -246,7 +278,7 @@ def paper_rows(stage, table, fits, tank, gains_cmp, full_cmp) -> list[dict]:
                         f"II {100 * e2:.0f} %, I {100 * e1:.0f} %", "agrees": bool(e2 < e1)})
     g5 = gains_cmp.get("I (n=m=5)")
     if g5 is not None:
-        g10, g2 = gains_cmp["I (n=5, m=10)"], gains_cmp["II, two psi, phi fitted"]
+        g10, g2 = gains_cmp[I_LAW], gains_cmp[II_LAW]
         rows.append({"result": "pressure gain: I (5, 10) better than I (5, 5)", "paper": "yes",
                      "workbench": "yes" if g10 < g5 else "no", "unit": "-",
                      "source": "sect. 4.2, Fig. 4a: better for degrees greater than five",
@@ -273,13 +305,15 @@ def main(argv=None) -> int:
 def _body(args, out: Path, done: list) -> int:
     t0 = time.perf_counter()
     with rp.step("flow stage and its table"):
-        stage, table = build_table(args.quick)
+        stage, table, blocked = build_table(args.quick)
         table.to_csv(out / "valve_table.csv")
-        done.append(_stage_section(stage, table))
+        write_pressure_gain(out / "pressure_gain.csv", blocked)
+        done.append(_stage_section(stage, table, blocked))
     with rp.step("approximations I and II"):
-        fits = fit_all(table, args.quick)
+        fits = fit_all(table, blocked, args.quick)
         laws = {"true valve": stage.flow, **{k: f.flow for k, f in fits.items()}}
-        done.append(_fit_section(table, fits))
+        border = border_error(stage, table, fits[I_LAW])
+        done.append(_fit_section(table, fits, border))
     with rp.step("pressure gain characteristic"):
         lo, hi = table.pressure_range
         fine = np.linspace(-2.0, 2.0, 81 if args.quick else 401)
@@ -289,12 +323,13 @@ def _body(args, out: Path, done: list) -> int:
         gains_cmp = {lab: c["max_abs_dp_e_Pa"] for lab, c in full_cmp.items()}
         done.append(_gain_section(gains, gains_cmp))
     with rp.step("tank steps and tangent models"):
-        tank = vf.tank_steps(laws, "true valve", volume=PAPER["volume"][0], u_e=0.0, steps=STEPS,
+        tank = vf.tank_steps(laws, "true valve", volume=PAPER["volume"][0], u_e=0.0,
+                             steps=STEPS + BETWEEN,
                              k=PAPER["k"][0], p_range=(lo, hi), samples=200 if args.quick else 600)
         budget = end_error_budget(tank, stage, fits)
         centre = centre_column_slope(table, tank.steps[("true valve", 1.0)].p_e)
         trows, reasons = tangent_rows(tank, centre, fits)
-        clean = noise_free_errors(stage, table, tank)
+        clean = noise_free_errors(stage, table, tank, len(blocked))
         done.append(_tank_section(tank, budget, clean))
         done.append(_tangent_section(trows, reasons))
     with rp.step("write report"):
@@ -325,6 +360,7 @@ def _body(args, out: Path, done: list) -> int:
                    "pressure_gain_max_dp_e_Pa": gains_cmp, "tank_steps": tank.to_dict(),
                    "end_error_budget": budget, "tangent_reasons": reasons,
                    "tank_errors_I_noise_free_percent": {str(k): v for k, v in clean.items()},
+                   "border_error_I": border,
                    "quick": bool(args.quick), "run_time_s": time.perf_counter() - t0}
         atomic_write_text(out / "summary.json",
                           json.dumps(summary, indent=1, default=rp.json_default) + "\n")
@@ -332,7 +368,7 @@ def _body(args, out: Path, done: list) -> int:
     return 0
 
 
-def _stage_section(stage, table):
+def _stage_section(stage, table, blocked):
     return rp.Section("The flow stage (assumptions where the paper is silent)", [
         rp.Paragraph("Paper 003 characterises one port of the 3/2 Servotronic globally (its "
                      "Fig. 3) but gives neither the supply pressure nor the conductances. The "
@@ -340,15 +376,37 @@ def _stage_section(stage, table):
                      "restriction A_S(u) and an exhaust restriction A_E(u), each an ISO 6358 "
                      "restriction with a rounded underlap) and calibrates the one number the "
                      "paper gives: the centred port rests at 5.1e5 Pa (section 5). Measurement "
-                     "noise of 0.05 g/s is added to every point."),
+                     "noise of 0.05 g/s is added to every point. The bench also reads the "
+                     "blocked port's pressure at each command (q = 0 exactly; transducer noise "
+                     "0.01 bar), the pressure gain characteristic of the paper's Fig. 3d, where "
+                     "it lies more than 5 % of the range inside atmosphere and supply (beyond, "
+                     "the port is saturated and p_e no longer depends on u). Both fits pass "
+                     "through these points (q(p_e, u) = 0 imposed): near the centred spool the "
+                     "restoring slope is small, so a flow reading's 0.05 g/s noise moves the "
+                     "zero crossing by tenths of a bar, while the transducer fixes it to 0.01 bar."),
         rp.KeyValues([("flow stage", stage.summary()),
                       ("exhaust conductance (calibrated)", f"{stage.exhaust_conductance:.4g} m^3/(s Pa)"),
                       ("full inlet flow", f"{1e3 * stage.max_flow():.3g} g/s"),
-                      ("table", f"{len(table)} points: 21 commands x 10 pressures (paper: 201)")]),
+                      ("table", f"{len(table)} points: 21 commands x 10 pressures (paper: 201)"),
+                      ("blocked-port points", ", ".join(f"{u:+.2g} V: {p / 1e5:.3f} bar"
+                                                        for u, p in blocked))]),
     ])
 
 
-def _fit_section(table, fits):
+def border_error(stage, table, fit) -> dict:
+    """Where approximation I's largest error is, and the same fit's on the noise-free grid
+    (model error, not noise), g/s; with the full inlet flow as the scale."""
+    clean = stage.table(table.u, table.p, noise=0.0)
+    pg = np.array(fit.pressure_gain).reshape(-1, 2)
+    free = vf.fit_polynomial(clean, *fit.degrees, pressure_gain=pg if len(pg) else None)
+    q = fit.quality
+    return {"max_error_g_s": q.max_error_g_s, "at_u_V": q.worst_u, "at_p_Pa": q.worst_p,
+            "noise_free_max_error_g_s": free.quality.max_error_g_s,
+            "noise_free_at_u_V": free.quality.worst_u, "noise_free_at_p_Pa": free.quality.worst_p,
+            "full_flow_g_s": 1e3 * stage.max_flow()}
+
+
+def _fit_section(table, fits, border):
     rows = [[lab, paper_count(f), f.quality.free, f.quality.r, f.quality.max_error_g_s,
              f.quality.rms_g_s] for lab, f in fits.items()]
     errors = {lab: f.flow(table.p, table.u) - table.q_m for lab, f in list(fits.items())[:3]}
@@ -366,6 +424,19 @@ def _fit_section(table, fits):
                      "the inlet law vanishes at supply and the exhaust law at atmosphere; the "
                      "two-branch law meets the paper's R and error bound. The workbench takes "
                      "the first reading as the paper's approximation II."),
+        rp.Paragraph(f"Approximation I's largest error, {border['max_error_g_s']:.2f} g/s, is at "
+                     f"u = {border['at_u_V']:.3g} V, p = {border['at_p_Pa'] / 1e5:.2f} bar; "
+                     "fitted to the same grid without noise it is "
+                     f"{border['noise_free_max_error_g_s']:.2f} g/s at u = "
+                     f"{border['noise_free_at_u_V']:.3g} V, p = "
+                     f"{border['noise_free_at_p_Pa'] / 1e5:.2f} bar: a model error at the border "
+                     "of the table (the open restriction's flow falls to zero at supply or "
+                     "atmosphere as a square root, with an infinite slope no polynomial in p "
+                     "follows), not noise. Paper 003 does not give its valve's flow scale; ours "
+                     f"is {border['full_flow_g_s']:.2f} g/s full inlet flow (assumed "
+                     f"conductance), so the error is {100 * border['max_error_g_s'] / border['full_flow_g_s']:.1f} "
+                     "% of full flow, and the paper's 0.4 g/s bound is met or not by the "
+                     "assumed size of the valve, not by the method."),
         rp.Figure(plots.valve_error_figure(table.u, table.p, errors),
                   "Flow errors over the table (paper Figs. 4b and 6b)"),
     ])
@@ -382,10 +453,11 @@ def _gain_section(gains, cmp_):
 
 
 def _tank_section(tank, budget, clean):
-    keep = ("true valve", "I (n=5, m=10)", "II, two psi, phi fitted", "II, two psi, phi from centre")
+    keep = ("true valve", I_LAW, II_LAW, I_FLOW)
     shown = vf.TankStepTests(volume=tank.volume, k=tank.k, temperature=tank.temperature,
                              u_e=tank.u_e, reference=tank.reference,
-                             steps={k: v for k, v in tank.steps.items() if k[0] in keep})
+                             steps={k: v for k, v in tank.steps.items()
+                                    if k[0] in keep and k[1] in STEPS})
     rows = [[b["law"], b["du_V"], b["max_error_percent"], b["max_error_of_p_e0_percent"],
              b["p_e_true_Pa"] / 1e5,
              b["flow_error_g_s"], b["cp_kg_s_Pa"] * 1e8, b["end_error_Pa"] / 1e5,
@@ -411,10 +483,12 @@ def _tank_section(tank, budget, clean):
     ])
 
 
-def noise_free_errors(stage, table, tank) -> dict[float, float]:
-    """Approximation I (5, 10) fitted to the same grid without noise: its tank errors, %."""
+def noise_free_errors(stage, table, tank, n_blocked: int) -> dict[float, float]:
+    """Approximation I (5, 10) fitted to the same grid and blocked-port commands without
+    noise: its tank errors, %."""
     clean = stage.table(table.u, table.p, noise=0.0)
-    fit = vf.fit_polynomial(clean, 5, 10)
+    blocked = stage.blocked_port(np.unique(table.u), margin=ASSUMED["gain_margin"])
+    fit = vf.fit_polynomial(clean, 5, 10, pressure_gain=blocked)
     tk = vf.tank_steps({"true valve": stage.flow, "I": fit.flow}, "true valve", volume=tank.volume,
                        u_e=tank.u_e, steps=STEPS, k=tank.k, p_range=clean.pressure_range,
                        samples=len(tank.steps[("true valve", 1.0)].t))
@@ -422,31 +496,37 @@ def noise_free_errors(stage, table, tank) -> dict[float, float]:
 
 
 def _downward_text(budget, clean: dict) -> str:
-    """Why approximation I exceeds 2 % on a step, from the measured budget."""
+    """Why approximation I exceeds 2 % on a step, from the measured budget: on the flow
+    points alone (the zero crossing), and through the blocked-port points (the border)."""
     parts = []
     for b in budget:
-        if not b["law"].startswith("I (n=5, m=10") or b["max_error_percent"] <= 2:
+        if b["max_error_percent"] <= 2 or b["law"] not in (I_LAW, I_FLOW):
             continue
-        if b["worst_at_end"]:
+        if b["law"] == I_FLOW and b["worst_at_end"]:
             parts.append(
-                f"After {b['du_V']:+g} V the error ({b['max_error_percent']:.1f} %) is the end "
-                f"error: Cp there is {b['cp_kg_s_Pa']:.3g} kg/(s Pa), so 2 % of "
-                f"{b['p_e_true_Pa'] / 1e5:.2f} bar needs a flow error below "
-                f"{b['needed_flow_error_g_s']:.3f} g/s; the fit's is {b['flow_error_g_s']:.3f} "
-                "g/s, within the table's 0.05 g/s measurement noise: no fit of this table can "
-                f"promise 2 % there (fitted to the same grid without noise: "
-                f"{clean[b['du_V']]:.2f} %).")
-        else:
+                f"Fitted to the flow points alone, after {b['du_V']:+g} V the error "
+                f"({b['max_error_percent']:.1f} %) is the end error: Cp there is "
+                f"{b['cp_kg_s_Pa']:.3g} kg/(s Pa), so 2 % of {b['p_e_true_Pa'] / 1e5:.2f} bar "
+                f"needs a flow error below {b['needed_flow_error_g_s']:.3f} g/s at the zero "
+                f"crossing; the fit's is {b['flow_error_g_s']:.3f} g/s, within the table's "
+                "0.05 g/s measurement noise: flow readings alone cannot place the zero crossing "
+                "to 2 %. Through the blocked-port points the same polynomial meets it.")
+        elif b["law"] == I_LAW:
             parts.append(
-                f"After {b['du_V']:+g} V the worst error ({b['max_error_percent']:.1f} %) is "
-                f"in the transient at {b['worst_t_s']:.1f} s and {b['worst_p_true_Pa'] / 1e5:.2f} "
-                f"bar, where the true flow is {b['flow_at_worst_g_s']:.3f} g/s and the fit's is "
+                f"Through the blocked-port points, after {b['du_V']:+g} V the worst error "
+                f"({b['max_error_percent']:.1f} %, "
+                f"{b['max_error_of_p_e0_percent']:.1f} % of 5.1 bar) is "
+                + (f"in the transient at {b['worst_t_s']:.1f} s and "
+                   f"{b['worst_p_true_Pa'] / 1e5:.2f} bar" if not b["worst_at_end"] else
+                   f"at the end, {b['p_e_true_Pa'] / 1e5:.2f} bar")
+                + f", where the true flow is {b['flow_at_worst_g_s']:.3f} g/s and the fit's is "
                 f"off by {b['flow_error_at_worst_g_s']:.3f} g/s: the polynomial's error near the "
                 "border of the table (paper 003's 'border effect': the exhaust flow goes as "
-                "sqrt(1 - ((p_atm/p - b)/(1 - b))^2), with an infinite slope as p -> p_atm, which "
-                "no polynomial in p follows) acting on a small flow, divided by a "
-                f"small pressure (fitted to the same grid without noise: {clean[b['du_V']]:.2f} %, "
-                + ("a model error)." if clean[b["du_V"]] > 2 else "so the noise causes it)."))
+                "sqrt(1 - ((p_atm/p - b)/(1 - b))^2), with an infinite slope as p -> p_atm, "
+                "which no polynomial in p follows) acting on a small flow, divided by a small "
+                f"pressure. Fitted without noise: {clean[b['du_V']]:.2f} % ("
+                + ("a model error)." if clean[b["du_V"]] > 2 else
+                   "so the table's noise adds the rest).") if b["du_V"] in clean else ")")
     return " ".join(parts) or "Approximation I stays within 2 % on every step."
 
 
