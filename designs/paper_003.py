@@ -292,6 +292,34 @@ def paper_rows(stage, table, fits, tank, gains_cmp, full_cmp) -> list[dict]:
     return rows
 
 
+#: Where the report measures the cause of a disagreeing row (by the row's result text).
+EXPLAINED = {
+    "largest flow error": "section 'Approximations and their accuracy' (the border of the "
+                          "table: square-root nozzle law at supply and atmosphere; noise-free "
+                          "fit measured)",
+    "(15 coef.)": "section 'Approximations and their accuracy' (one psi cannot vanish at "
+                  "supply and at atmosphere at once)",
+    "tank error": "section 'Tank steps' (budget of each step: flow error over Cp, the border "
+                  "near atmosphere, the noise-free fit)",
+    "Cp, Gu": "section 'Pressure gain characteristic' (Cp, Gu errors by |u|: Gamma's single "
+              "bend in the underlap)",
+    "pressure gain:": "section 'Pressure gain characteristic' (where each law's largest "
+                      "equilibrium error is)",
+}
+
+
+def _where_explained(rows) -> str:
+    """One sentence per disagreeing row: where its measured cause is in the report."""
+    parts = []
+    for r in rows:
+        if r["agrees"]:
+            continue
+        where = next((v for k, v in EXPLAINED.items() if k in r["result"]), None)
+        parts.append(f"'{r['result']}': " + (where or "no measured explanation in this report"))
+    return ("Disagreements and where their causes are measured: " + "; ".join(parts) + "."
+            if parts else "Every row agrees.")
+
+
 def _fmt(v):
     return v if isinstance(v, str) else (f"{v:.4g}" if isinstance(v, float) else str(v))
 
@@ -321,7 +349,8 @@ def _body(args, out: Path, done: list) -> int:
         full_cmp = {lab: vf.compare_pressure_gain(gains["true valve"], g, (lo, hi))
                     for lab, g in gains.items() if lab != "true valve"}
         gains_cmp = {lab: c["max_abs_dp_e_Pa"] for lab, c in full_cmp.items()}
-        done.append(_gain_section(gains, gains_cmp))
+        bands = gain_bands(gains, (lo, hi))
+        done.append(_gain_section(gains, gains_cmp, bands))
     with rp.step("tank steps and tangent models"):
         tank = vf.tank_steps(laws, "true valve", volume=PAPER["volume"][0], u_e=0.0,
                              steps=STEPS + BETWEEN,
@@ -340,6 +369,7 @@ def _body(args, out: Path, done: list) -> int:
                      [[r["result"], _fmt(r["paper"]), _fmt(r["workbench"]), r["unit"], r["how"],
                        r["source"], r["agrees"]] for r in rows],
                      caption="Paper value | workbench value | how obtained | agrees?"),
+            rp.Paragraph(_where_explained(rows)),
             rp.Paragraph(f"{n_ok} of {len(rows)} results agree. Every paper value is quoted "
                          "from paper 003 (section, figure); the flow stage's supply, "
                          "conductance, critical ratio, underlap and command range are assumed "
@@ -360,7 +390,7 @@ def _body(args, out: Path, done: list) -> int:
                    "pressure_gain_max_dp_e_Pa": gains_cmp, "tank_steps": tank.to_dict(),
                    "end_error_budget": budget, "tangent_reasons": reasons,
                    "tank_errors_I_noise_free_percent": {str(k): v for k, v in clean.items()},
-                   "border_error_I": border,
+                   "border_error_I": border, "gain_bands": bands,
                    "quick": bool(args.quick), "run_time_s": time.perf_counter() - t0}
         atomic_write_text(out / "summary.json",
                           json.dumps(summary, indent=1, default=rp.json_default) + "\n")
@@ -442,13 +472,66 @@ def _fit_section(table, fits, border):
     ])
 
 
-def _gain_section(gains, cmp_):
-    rows = [[lab, None if v is None else v / 1e5] for lab, v in cmp_.items()]
+#: Bands of |u - u_e| (V) over which the Cp and Gu errors along p_e(u) are summarised.
+BANDS = ((0.0, 0.3), (0.3, 0.7), (0.7, 1.0), (1.0, 2.0))
+
+
+def gain_bands(gains, p_range, margin: float = 0.02) -> dict:
+    """Per law: where its largest |p_e - p_e,true| is, and the median relative Cp and Gu
+    errors over bands of |u| (the same commands as compare_pressure_gain)."""
+    ref = gains["true valve"]
+    lo, hi = p_range
+    ok = (ref.p_e > lo + margin * (hi - lo)) & (ref.p_e < hi - margin * (hi - lo))
+    out = {}
+    for lab, g in gains.items():
+        if lab == "true valve":
+            continue
+        pe, cp, gu = g.at(ref.u)
+        dpe = np.where(ok & np.isfinite(pe), np.abs(pe - ref.p_e), -1.0)
+        i = int(np.argmax(dpe))
+        rel_cp, rel_gu = np.abs(cp / ref.cp - 1), np.abs(gu / ref.gu - 1)
+        rows = []
+        for a, b in BANDS:
+            sel = ok & (np.abs(ref.u) >= a) & (np.abs(ref.u) < b)
+            rows.append((float(np.nanmedian(rel_cp[sel])) if sel.any() else None,
+                         float(np.nanmedian(rel_gu[sel])) if sel.any() else None))
+        out[lab] = {"worst_u_V": float(ref.u[i]), "worst_p_true_Pa": float(ref.p_e[i]),
+                    "bands": rows}
+    return out
+
+
+def _gain_section(gains, cmp_, bands):
+    rows = [[lab, None if v is None else v / 1e5, bands[lab]["worst_u_V"],
+             bands[lab]["worst_p_true_Pa"] / 1e5] for lab, v in cmp_.items()]
+    brows = [[lab] + [100 * v if v is not None else None for pair in b["bands"] for v in pair]
+             for lab, b in bands.items()]
+    heads = [f"{c}, {a:g}-{b:g} V" for a, b in BANDS for c in ("Cp", "Gu")]
+    ii, one = bands[II_LAW]["bands"], bands[I_LAW]["bands"]
     return rp.Section("Pressure gain characteristic", [
-        rp.Table(["law", "max |p_e - p_e,true|"], rows, units=["", "bar"],
+        rp.Table(["law", "max |p_e - p_e,true|", "at u", "true p_e there"], rows,
+                 units=["", "bar", "V", "bar"],
                  caption="Equilibrium pressure error where the true equilibrium is inside the range"),
         rp.Figure(plots.pressure_gain_figure(list(gains.values()), u_range=(-1.5, 1.5)),
                   "q_m(p_e, u) = 0 with Cp and Gu along it (paper Figs. 3d, 4a, 6a, 8)"),
+        rp.Table(["law", *heads], brows, units=["", *["%"] * len(heads)],
+                 caption="Median relative error of Cp and Gu along the true p_e(u), by |u|"),
+        rp.Paragraph("Where approximation II's tangent coefficients are off: its Gu error is "
+                     f"largest for 0.3 <= |u| < 1 V (median {100 * ii[1][1]:.0f} % and "
+                     f"{100 * ii[2][1]:.0f} %, against {100 * one[1][1]:.0f} % and "
+                     f"{100 * one[2][1]:.0f} % for I), the underlap, where the real opening "
+                     "bends from the centred leakage (both restrictions open d/2) to the "
+                     "opening law. Gamma(s) = g1 s + g2 s|s| over s in [-1, 1] has one bend "
+                     "for the whole command range and cannot bend within |s| < 0.1, and phi, "
+                     "the same for every u, cannot let the leakage vanish as the spool opens; "
+                     "approximation I, degree 10 in u, follows the bend. Paper 003's "
+                     "'seems to be better' for II is a reading of its Fig. 8 on its own valve; "
+                     "on this flow stage it is measured the other way. The same bend sets II's "
+                     f"largest equilibrium error (at u = {bands[II_LAW]['worst_u_V']:+.2f} V, "
+                     "between two blocked-port points)"
+                     + (f", while I (n = m = 5) errs most at u = "
+                        f"{bands['I (n=m=5)']['worst_u_V']:+.2f} V, p_e = "
+                        f"{bands['I (n=m=5)']['worst_p_true_Pa'] / 1e5:.2f} bar, near atmosphere."
+                        if "I (n=m=5)" in bands else ".")),
     ])
 
 
