@@ -65,7 +65,8 @@ def add_valve(subparsers) -> None:
     v.add_argument("--phi-from", choices=("fit", "centre"), default="fit",
                    help="approximation II: fit phi with the rest (default) or to the centred "
                         "command's column alone (q(p, centre) = phi(p): the leakage measured "
-                        "directly; keeps the tank's time constant at the centre)")
+                        "directly, but its slope, the tank's Cp at the centre, only from that "
+                        "column's noisy points; --pressure-gain fixes the tangent model better)")
     v.add_argument("--pressure-gain", metavar="PG.csv",
                    help="measured blocked-port points (CSV header 'u,p': V, Pa absolute): "
                         "both fits pass through q(p_e, u) = 0 there exactly (the pressure "
