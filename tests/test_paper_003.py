@@ -45,7 +45,8 @@ def flow(st, p, u):
 def test_summary_contract_and_files(run):
     rc, summary, out = run
     assert rc == 0
-    for name in ("report.html", "report.pdf", "valve_table.csv", "summary.json"):
+    for name in ("report.html", "report.pdf", "valve_table.csv", "pressure_gain.csv",
+                 "summary.json"):
         assert (out / name).stat().st_size > 0, name
     rows = summary["paper_results"]
     assert len(rows) >= 10
@@ -89,7 +90,7 @@ def test_headline_accuracy_against_the_paper(run):
     carries 0.05 g/s noise (its largest of 210 draws is about 0.15 g/s), so the largest
     error is allowed the paper's bound plus that 0.15 g/s for approximation I."""
     fits = run[1]["fits"]
-    one, two = fits["I (n=5, m=10)"], fits["II, two psi, phi fitted"]
+    one, two = fits["I (n=5, m=10)"], fits["II, two psi"]
     assert one["paper_count"] == 66 and one["R"] >= 0.99
     assert one["max_error_g_s"] <= 0.4 + 0.15
     assert two["R"] >= 0.99 and two["max_error_g_s"] <= 0.5
@@ -97,15 +98,33 @@ def test_headline_accuracy_against_the_paper(run):
 
 
 def test_tangent_models_and_their_reasons(run):
-    """Approximation II with phi from the centred column has the true tau within 20 %;
-    with phi fitted freely tau is off by more than 1.5x (issue 13's finding), and the
-    report gives the measured reason."""
+    """Through the blocked-port points, approximations I and II (two psi) have the true
+    valve's tau and G within 20 % (the report's 'poor' line: a step response visibly
+    different, paper Fig. 10; measured 2 % and 5 %). On the flow points alone II's tau
+    is off by more than 1.5x (issue 13's finding: 15.1 s against 7.63 s), and the report
+    gives the measured reason."""
     summary = run[1]
     runs = {r["law"]: r for r in summary["tank_steps"]["runs"] if r["du_V"] == 1.0}
-    true = runs["true valve"]["tau_s"]
-    assert runs["II, two psi, phi from centre"]["tau_s"] == pytest.approx(true, rel=0.2)
-    assert runs["II, two psi, phi fitted"]["tau_s"] > 1.5 * true
-    assert "phi'(p_e)" in summary["tangent_reasons"]["II, two psi, phi fitted"]
+    true = runs["true valve"]
+    for law in ("I (n=5, m=10)", "II, two psi"):
+        assert runs[law]["tau_s"] == pytest.approx(true["tau_s"], rel=0.2), law
+        assert runs[law]["G_Pa_V"] == pytest.approx(true["G_Pa_V"], rel=0.2), law
+    assert runs["II, two psi, flow points only"]["tau_s"] > 1.5 * true["tau_s"]
+    assert "phi'(p_e)" in summary["tangent_reasons"]["II, two psi, flow points only"]
+
+
+def test_tank_errors_of_approximation_I(run):
+    """Paper 003, sect. 5: approximation I's tank pressure error is below 2 %. Through the
+    blocked-port points this holds after +-0.1 V and after steps to commands with no
+    blocked-port point (+-0.05, +-0.25 V: the constraints do not merely return their own
+    measurements); the +-1 V row disagrees and the report explains it from the budget."""
+    rows = {r["result"]: r for r in run[1]["paper_results"]}
+    small = rows["approximation I tank error, +-0.1 V steps (Fig. 10)"]
+    between = rows["approximation I tank error, steps between the measured commands"]
+    assert small["workbench"] <= 2.0 and small["agrees"]
+    assert between["workbench"] <= 2.0 and between["agrees"]
+    large = rows["approximation I tank error, +-1 V steps (Fig. 9)"]
+    assert large["agrees"] == (large["workbench"] <= 2.0)
 
 
 def test_end_error_is_the_pressure_gain_error(run):
@@ -129,14 +148,17 @@ def test_end_error_is_the_pressure_gain_error(run):
 
 
 def test_written_table_refits_to_the_same_approximation(run, capsys):
-    """valve_table.csv (written with shortest round-trip floats) refitted by the CLI gives
-    the report's approximation I: same R and largest error to rounding (1e-12)."""
+    """valve_table.csv and pressure_gain.csv (shortest round-trip floats) refitted by the
+    CLI give the report's approximation I: same R and largest error to rounding (1e-12),
+    and the law passes through the blocked-port points."""
     from workbench.__main__ import main
     summary, out = run[1], run[2]
     assert main(["identify", "valve", str(out / "valve_table.csv"), "--approx", "I",
-                 "--coefficients", "66", "--no-tank", "--json"]) == 0
+                 "--coefficients", "66", "--no-tank", "--json",
+                 "--pressure-gain", str(out / "pressure_gain.csv")]) == 0
     got = json.loads(capsys.readouterr().out)["approximation_I"]
     want = summary["fits"]["I (n=5, m=10)"]
     assert got["degrees"] == {"n_pressure": 5, "m_command": 10}
     assert got["R"] == pytest.approx(want["R"], abs=1e-12)
     assert got["max_error_g_s"] == pytest.approx(want["max_error_g_s"], abs=1e-9)
+    assert len(got["pressure_gain_points"]) >= 3

@@ -65,7 +65,13 @@ def add_valve(subparsers) -> None:
     v.add_argument("--phi-from", choices=("fit", "centre"), default="fit",
                    help="approximation II: fit phi with the rest (default) or to the centred "
                         "command's column alone (q(p, centre) = phi(p): the leakage measured "
-                        "directly; keeps the tank's time constant at the centre)")
+                        "directly, but its slope, the tank's Cp at the centre, only from that "
+                        "column's noisy points; --pressure-gain fixes the tangent model better)")
+    v.add_argument("--pressure-gain", metavar="PG.csv",
+                   help="measured blocked-port points (CSV header 'u,p': V, Pa absolute): "
+                        "both fits pass through q(p_e, u) = 0 there exactly (the pressure "
+                        "gain characteristic, which sets a closed tank's steady state and "
+                        "tangent model far more precisely than flow readings near zero flow)")
     v.add_argument("--degrees", nargs=2, type=int, metavar=("N", "M"),
                    help="approximation I degrees in p and u (default 5 10, paper 003)")
     v.add_argument("--select", action="store_true",
@@ -207,19 +213,21 @@ def _cmd_valve(args: argparse.Namespace) -> int:
         raise InputError("--plant-toml writes the input-affine law: use --approx II or both",
                          location="--plant-toml")
     base = PlantParams.from_toml(args.base) if args.base else None
+    blocked = _lazy("load_pressure_gain")(args.pressure_gain) if args.pressure_gain else None
     phi_deg = None if args.affine_degrees[0] < 0 else args.affine_degrees[0]
     report = analyse(table, approx=args.approx,
                      degrees=tuple(args.degrees) if args.degrees else None, select=args.select,
                      affine_degrees=(phi_deg, args.affine_degrees[1], args.affine_degrees[2]),
                      pin_ends=args.pin_ends, shared_psi=args.shared_psi, phi_from=args.phi_from,
                      tank_volume=args.tank_volume, tank=not args.no_tank,
-                     reference=_valve_reference(args, table))
+                     reference=_valve_reference(args, table), pressure_gain=blocked)
     result = report.to_dict()
     if args.plant_toml:
         report = _write_plant_toml(args, base, table, report, result)
     if args.out:
         from ...output import result_set
-        inputs = [args.table, args.base, args.reference_plant, args.plant_toml]
+        inputs = [args.table, args.base, args.reference_plant, args.plant_toml,
+                  args.pressure_gain]
         with result_set(args.out, inputs=inputs) as stage:     # all files or none
             (stage / "valve_fit.json").write_text(json.dumps(result, indent=2) + "\n")
             result["files"] = ["valve_fit.json"] + ([] if args.no_plot

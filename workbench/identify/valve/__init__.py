@@ -41,14 +41,16 @@ valve), :mod:`.polynomial` (approximation I), :mod:`.affine` (approximation II),
 :mod:`.quality` (R and errors), :mod:`.gain` (pressure gain characteristic),
 :mod:`.tank` (tank step tests), :mod:`.report` (all at once, figures),
 :mod:`.flow_stage` (a 3/2 flow stage like paper 003's, the known law of ``designs/paper_003.py``),
-:mod:`.catalog` (datasheet nominal-flow curves), :mod:`.counts` (degrees from paper 003's
+:mod:`.catalog` (datasheet nominal-flow curves), :mod:`.blocked` (blocked-port pressure gain
+points as fit constraints), :mod:`.counts` (degrees from paper 003's
 coefficient counts), :mod:`.plausibility` (flow limits before a fit is written to a plant).
 
 Command line (:mod:`workbench.cli.identify`): ``workbench identify valve TABLE.csv
 --approx both --out DIR`` and ``workbench identify valve-table PLANT.toml --out
 TABLE.csv`` (the generator). ``--approximation II --coefficients 15`` picks paper 003's
 structure by its coefficient count (:mod:`.counts`), ``--phi-from centre`` holds phi at the
-centred column, ``--catalog --critical-ratio B --supply-pressure P`` fits a datasheet
+centred column, ``--pressure-gain PG.csv`` makes both fits pass through measured
+blocked-port points q(p_e, u) = 0 (:mod:`.blocked`), ``--catalog --critical-ratio B --supply-pressure P`` fits a datasheet
 nominal-flow curve (:mod:`.catalog`), and ``--plant-toml`` is refused when the fitted
 law's flows exceed the ISO 6358 choked flow of the base plant's conductance
 (:mod:`.plausibility`). Fits refuse what the data cannot determine (a polynomial degree
@@ -58,6 +60,7 @@ beyond the distinct pressures, a flow direction without data).
 from __future__ import annotations
 
 from .affine import PRESSURE_SCALE, AffineTableFit, fit_affine
+from .blocked import check_pressure_gain_points, load_pressure_gain
 from .catalog import CatalogCurve, catalog_table, load_catalog_curve
 from .counts import affine_count, affine_structure, polynomial_degrees
 from .flow_stage import FlowStage, chebyshev_pressures
@@ -80,6 +83,7 @@ __all__ = [
     "affine_count", "affine_structure", "polynomial_degrees", "flow_limit_problems",
     "FitQuality", "PolynomialValveFit", "fit_polynomial", "DegreeSelection", "select_degrees",
     "AffineTableFit", "fit_affine", "TableLaw",
+    "check_pressure_gain_points", "load_pressure_gain",
     "PressureGain", "pressure_gain", "pressure_gain_from_data", "compare_pressure_gain",
     "TankStep", "TankStepTests", "tank_steps",
     "ValveFitReport", "analyse", "valve_curves", "write_figures", "serial_blas",

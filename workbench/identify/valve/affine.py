@@ -12,7 +12,8 @@ import numpy as np
 from ...errors import InputError, WorkbenchError
 from ...physics.valve import AffineValveFit, gamma_odd
 from ._numeric import clip as _clip, is_symbolic as _is_sym, numeric as _numeric
-from .lstsq import lstsq as _lstsq
+from .blocked import check_pressure_gain_points
+from .lstsq import constraint_rank, lstsq as _lstsq, lstsq_equality
 from .quality import FitQuality, _normalised_command, _quality
 from .table import G_PER_KG, ValveTable
 
@@ -39,6 +40,7 @@ class AffineTableFit:
     pin_ends : whether q(p_supply, s = 1) = 0 and q(p_atm, s = -1) = 0 were imposed.
     phi_from : ``"fit"`` (phi fitted with the rest) or ``"centre"`` (phi fitted to the
         centred command's column alone, then held: q(p, centre) = phi(p) by the form).
+    pressure_gain : the blocked-port points (u in V, p_e in Pa) imposed as q = 0.
     supply_pressure, atmospheric_pressure : Pa, used by ``pin_ends``.
     solver_status : IPOPT's return status. iterations : its iteration count.
 
@@ -68,6 +70,7 @@ class AffineTableFit:
     solver_status: str
     iterations: int
     phi_from: str = "fit"
+    pressure_gain: tuple[tuple[float, float], ...] = ()
 
     @property
     def phi(self) -> tuple[float, ...]:
@@ -133,6 +136,7 @@ class AffineTableFit:
                                     "clipped to [-1, 1]",
                 "normalisation": self.normalisation, "pin_ends": self.pin_ends,
                 "phi_from": self.phi_from,
+                "pressure_gain_points": [list(r) for r in self.pressure_gain],
                 "solver_status": self.solver_status, "iterations": self.iterations,
                 **self.quality.to_dict()}
 
@@ -147,7 +151,8 @@ def _to_bar_monomials(coeffs: np.ndarray, offset_bar: float, scale_bar: float) -
 def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 5,
                gamma_degree: int = 2, *, pin_ends: bool = False, monotone: bool = True,
                shared_psi: bool = False, phi_from: str = "fit", center: float | None = None,
-               span: float | None = None, print_level: int = 0) -> AffineTableFit:
+               span: float | None = None, pressure_gain=None,
+               print_level: int = 0) -> AffineTableFit:
     """Approximation II with constraints, by CasADi + IPOPT (paper 003, eq. 5).
 
     Unknowns: the coefficients of phi (degree ``phi_degree``, or phi = 0 for None),
@@ -180,6 +185,11 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
     those of the data, not a compromise with the open-valve points. With ``"fit"``
     phi is fitted with everything else (paper 003's nonlinear regression).
 
+    ``pressure_gain``: optional measured blocked-port points, rows (u in V, p_e in Pa),
+    imposed as equality constraints q(p_e, u) = 0 (:mod:`.blocked` says why); a point at
+    the centred command constrains phi alone (phi(p_e) = 0), also when phi is taken
+    from the centred column. Each point removes one free parameter.
+
     Raises
     ------
     InputError
@@ -203,9 +213,15 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
     pb = _affine_problem(table, center, span, phi_degree, psi_degree, gamma_degree,
                          shared_psi, pin_ends)
     _check_determined(pb, table.source)
-    phi_fixed = _centre_phi(pb, table.source) if phi_from == "centre" else None
+    blocked = _blocked_points(pressure_gain, table, pb, center, span)
+    phi_fixed = _centre_phi(pb, table.source, blocked) if phi_from == "centre" else None
+    if phi_fixed is not None:
+        blocked = blocked[blocked[:, 0] != 0.0]       # met by phi_fixed already
     w, f, g = _affine_nlp(pb)
     cons, lbg, ubg = _affine_constraints(pb, g, monotone, pin_ends)
+    cons += [_affine_at(pb, g, s_k, x_k) for s_k, x_k in blocked]
+    lbg += [0.0] * len(blocked)
+    ubg += [0.0] * len(blocked)
     solver = ca.nlpsol("valve_affine", "ipopt", {"x": w, "f": f, "g": ca.vertcat(*cons)},
                        {"ipopt.print_level": int(print_level), "print_time": False,
                         "ipopt.tol": 1e-12, "ipopt.max_iter": 500, "ipopt.sb": "yes"})
@@ -225,8 +241,9 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
                          pressure_range=(lo, hi), points=len(pb.q))
     q_fit = np.asarray(_numeric(lambda p, u: law.flow(p, _clip((u - center) / span, -1.0, 1.0)))(
         table.p, table.u), dtype=float)
+    n_blocked = 0 if pressure_gain is None else len(np.asarray(pressure_gain))
     quality = _quality(table, q_fit, n_stored,
-                       pb.n_free - (pb.n_phi if phi_fixed is not None else 0))
+                       pb.n_free - (pb.n_phi if phi_fixed is not None else 0) - n_blocked)
     law = AffineValveFit(phi=phi, psi_in=psi_in, psi_out=psi_out, gamma=gamma,
                          pressure_scale=PRESSURE_SCALE, rms=quality.rms,
                          max_error=quality.max_error, pressure_range=(lo, hi), points=len(pb.q))
@@ -235,7 +252,9 @@ def fit_affine(table: ValveTable, phi_degree: int | None = 5, psi_degree: int = 
                           supply_pressure=table.supply_pressure,
                           atmospheric_pressure=table.atmospheric_pressure,
                           solver_status=status, iterations=int(stats.get("iter_count", -1)),
-                          phi_from=phi_from)
+                          phi_from=phi_from,
+                          pressure_gain=() if pressure_gain is None else tuple(
+                              (float(a), float(b)) for a, b in np.asarray(pressure_gain, float)))
 
 
 def _check_determined(pb: "_AffineProblem", source: str) -> None:
@@ -269,8 +288,42 @@ def _check_determined(pb: "_AffineProblem", source: str) -> None:
                              source=source, location="--affine-degrees")
 
 
-def _centre_phi(pb: "_AffineProblem", source: str) -> np.ndarray:
-    """phi (scaled, g/s) by least squares on the centred column: q(p, centre) = phi(p)."""
+def _blocked_points(points, table: ValveTable, pb: "_AffineProblem", center: float,
+                    span: float) -> np.ndarray:
+    """Pressure gain points as rows (s, x) in the fit's scaled variables (s = 0 exactly at
+    the centred command); refuses a centre point when phi is absent (q(p, centre) = 0)."""
+    if points is None:
+        return np.zeros((0, 2))
+    a = check_pressure_gain_points(points, table, table.source)
+    s = np.clip((a[:, 0] - center) / span, -1.0, 1.0)
+    s[np.abs(s) < 1e-12] = 0.0
+    if pb.n_phi == 0 and np.any(s == 0.0):
+        raise InputError("a pressure gain point at the centred command needs a phi "
+                         "polynomial: without phi the law gives q = 0 there at every pressure",
+                         source=table.source, location="pressure_gain")
+    for side, sel in (("above", s > 0), ("below", s < 0)):
+        if np.sum(sel) > pb.n_psi + pb.n_gam - 1:
+            raise InputError(f"{int(np.sum(sel))} pressure gain points {side} the centre, "
+                             f"more than the law has free parameters there; use fewer",
+                             source=table.source, location="pressure_gain")
+    return np.stack([s, (a[:, 1] - pb.p_mid) / pb.p_half], axis=1)
+
+
+def _affine_at(pb: "_AffineProblem", unknowns, s_k: float, x_k: float):
+    """q (g/s) of the law at one scaled point (s_k, x_k), symbolic in the unknowns."""
+    a, b_in, b_out, g = unknowns
+    q = sum(a[k] * x_k ** k for k in range(pb.n_phi)) if pb.n_phi else 0.0
+    if s_k != 0.0:
+        b = b_in if s_k > 0 else b_out
+        gam = sum(g[k] * s_k * abs(s_k) ** k for k in range(pb.n_gam))
+        q = q + sum(b[k] * x_k ** k for k in range(pb.n_psi)) * gam
+    return q
+
+
+def _centre_phi(pb: "_AffineProblem", source: str,
+                blocked: np.ndarray | None = None) -> np.ndarray:
+    """phi (scaled, g/s) by least squares on the centred column: q(p, centre) = phi(p);
+    blocked-port points at the centre (rows s = 0, x) are met exactly."""
     sel = np.abs(pb.s) < 1e-12
     if pb.n_phi == 0:
         raise InputError("phi from the centre needs a phi polynomial (its degree is -1)",
@@ -280,7 +333,14 @@ def _centre_phi(pb: "_AffineProblem", source: str) -> np.ndarray:
         raise InputError(f"phi from the centre needs the centred command (s = 0) measured at "
                          f"{pb.n_phi} or more distinct pressures; the table has {n_p} there",
                          source=source, location="--phi-from")
-    return _lstsq(pb.phi_basis[sel], pb.q[sel])
+    centre = np.zeros((0, 2)) if blocked is None else blocked[blocked[:, 0] == 0.0]
+    if len(centre) == 0:
+        return _lstsq(pb.phi_basis[sel], pb.q[sel])
+    C = np.vander(centre[:, 1], pb.n_phi, increasing=True)
+    if len(C) >= pb.n_phi or constraint_rank(C) < len(C):
+        raise InputError("too many pressure gain points at the centred command for phi's "
+                         "degree", source=source, location="pressure_gain")
+    return lstsq_equality(pb.phi_basis[sel], pb.q[sel], C)
 
 
 @dataclass(frozen=True)

@@ -136,6 +136,34 @@ class FlowStage:
                      "seed": int(seed)})
         return ValveTable.from_arrays(uu, pp, q, meta, source="<flow stage>")
 
+    def blocked_port(self, u_values: Sequence[float], margin: float = 0.05,
+                     noise: float = 0.0, seed: int = 0) -> np.ndarray:
+        """The pressure gain characteristic as a bench measures it: the port blocked
+        (q = 0 exactly) at each command, its pressure p_e(u) read with Gaussian noise of
+        ``noise`` Pa standard deviation.
+
+        Only commands whose p_e lies more than ``margin`` x (supply - atmosphere) inside
+        both ends are returned: there the port is saturated at atmosphere or supply
+        (p_e no longer depends on u), the pressure gain characteristic is flat and
+        carries no gain, and the nozzle law's infinite slope at the ends is what a
+        polynomial in p cannot follow (:mod:`.blocked`). Returns rows (u in V, p_e in Pa).
+        """
+        from scipy import optimize
+        if not (math.isfinite(noise) and noise >= 0):
+            raise InputError(f"expected a noise standard deviation >= 0 (Pa), got {noise!r}",
+                             location="noise")
+        if not 0.0 <= margin < 0.5:
+            raise InputError(f"expected a margin in [0, 0.5), got {margin!r}", location="margin")
+        lo, hi = self.atmospheric_pressure, self.supply_pressure
+        flow = _numeric(self.flow)
+        rng = np.random.default_rng(seed)
+        rows = []
+        for u in np.asarray(u_values, dtype=float):
+            pe = optimize.brentq(lambda p: float(flow(p, u)), lo, hi, xtol=1e-6, rtol=1e-14)
+            if lo + margin * (hi - lo) < pe < hi - margin * (hi - lo):
+                rows.append([float(u), pe + (rng.normal(0.0, noise) if noise > 0 else 0.0)])
+        return np.array(rows).reshape(-1, 2)
+
     def to_dict(self) -> dict[str, Any]:
         return {**asdict(self), "kind": "3/2 flow stage (two ISO 6358 restrictions, rounded "
                                         "underlap)", "max_flow_kg_s": self.max_flow()}

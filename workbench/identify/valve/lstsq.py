@@ -7,7 +7,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-__all__ = ["serial_blas", "lstsq"]
+__all__ = ["serial_blas", "lstsq", "lstsq_equality", "constraint_rank"]
 
 
 def _openblas_local_setters() -> list:
@@ -57,3 +57,27 @@ def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     with serial_blas():
         sol, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
     return sol / scale
+
+
+def lstsq_equality(A: np.ndarray, y: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """min |A c - y| subject to C c = 0, by the null space of C (columns scaled first).
+
+    ``C`` must have full row rank (checked by the caller: it raises a clear error when
+    the constraints are redundant or contradict each other).
+    """
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0.0] = 1.0
+    Cs = C / scale
+    with serial_blas():
+        q, _ = np.linalg.qr(Cs.T, mode="complete")
+        null = q[:, C.shape[0]:]
+        z, *_ = np.linalg.lstsq((A / scale) @ null, y, rcond=None)
+    return (null @ z) / scale
+
+
+def constraint_rank(C: np.ndarray) -> int:
+    """Numerical row rank of a constraint matrix (columns scaled to unit norm)."""
+    scale = np.linalg.norm(C, axis=0)
+    scale[scale == 0.0] = 1.0
+    with serial_blas():
+        return int(np.linalg.matrix_rank(C / scale, tol=1e-10 * max(C.shape)))

@@ -11,7 +11,8 @@ import numpy as np
 from ...errors import InputError
 from ...physics.valve import polyval
 from ._numeric import clip as _clip, json_floats as _json_floats
-from .lstsq import lstsq as _lstsq
+from .blocked import check_pressure_gain_points
+from .lstsq import constraint_rank, lstsq as _lstsq, lstsq_equality
 from .quality import FitQuality, _normalised_command, _quality
 from .table import G_PER_KG, ValveTable
 
@@ -34,6 +35,8 @@ class PolynomialValveFit:
         [1, 6] bar the monomials would span four decades).
     s_range : (low, high) normalised commands of the table.
     quality : FitQuality on the table.
+    pressure_gain : the blocked-port points (u in V, p_e in Pa) the fit passes through
+        (q = 0 there), empty when none were given.
     """
 
     coefficients: np.ndarray
@@ -43,6 +46,7 @@ class PolynomialValveFit:
     pressure_scale: float
     s_range: tuple[float, float]
     quality: FitQuality
+    pressure_gain: tuple[tuple[float, float], ...] = ()
 
     @property
     def degrees(self) -> tuple[int, int]:
@@ -63,6 +67,7 @@ class PolynomialValveFit:
                               "s": f"(u - {self.center!r}) / {self.span!r}, clipped to "
                                    f"[{self.s_range[0]!r}, {self.s_range[1]!r}]"},
                 "coefficients_kg_s": self.coefficients.tolist(),
+                "pressure_gain_points": [list(r) for r in self.pressure_gain],
                 **self.quality.to_dict()}
 
 
@@ -81,11 +86,15 @@ def _poly_vars(table: ValveTable, center: float, span: float):
 
 
 def fit_polynomial(table: ValveTable, n: int = 5, m: int = 10, *, center: float | None = None,
-                   span: float | None = None) -> PolynomialValveFit:
+                   span: float | None = None, pressure_gain=None) -> PolynomialValveFit:
     """Approximation I by linear least squares: degrees ``n`` in p and ``m`` in u.
 
     Paper 003 settles on n = 5, m = 10 (66 coefficients). Fitting is done in the
     scaled variables of :class:`PolynomialValveFit` (columns also normalised).
+
+    ``pressure_gain``: optional measured blocked-port points, rows (u in V, p_e in Pa),
+    imposed exactly as q(p_e, u) = 0 (least squares in the null space of the
+    constraints; :mod:`.blocked` says why). Each point removes one free coefficient.
 
     Raises
     ------
@@ -109,14 +118,36 @@ def fit_polynomial(table: ValveTable, n: int = 5, m: int = 10, *, center: float 
     center, span = _normalised_command(table, center, span)
     x, s, offset, scale = _poly_vars(table, center, span)
     A = _poly_design(x, s, n, m)
-    sol = _lstsq(A, table.q_m)
+    free = k
+    if pressure_gain is None:
+        sol = _lstsq(A, table.q_m)
+    else:
+        pts = check_pressure_gain_points(pressure_gain, table, table.source)
+        C = _poly_design((pts[:, 1] - offset) / scale, (pts[:, 0] - center) / span, n, m)
+        _check_constraints(C, k, table.source)
+        sol = lstsq_equality(A, table.q_m, C)
+        free = k - len(pts)
     coeffs = sol.reshape(n + 1, m + 1)
     coeffs.flags.writeable = False
     q_fit = A @ sol
     return PolynomialValveFit(coefficients=coeffs, center=center, span=span,
                               pressure_offset=offset, pressure_scale=scale,
                               s_range=(float(np.min(s)), float(np.max(s))),
-                              quality=_quality(table, q_fit, k, k))
+                              quality=_quality(table, q_fit, k, free),
+                              pressure_gain=() if pressure_gain is None else
+                              tuple((float(a), float(b)) for a, b in pts))
+
+
+def _check_constraints(C: np.ndarray, k: int, source: str) -> None:
+    """Refuse pressure gain points the polynomial cannot meet all at once."""
+    if len(C) >= k:
+        raise InputError(f"{len(C)} pressure gain points for {k} coefficients: the fit would be "
+                         "fixed by them alone (use fewer points or higher degrees)",
+                         source=source, location="pressure_gain")
+    if constraint_rank(C) < len(C):
+        raise InputError("the pressure gain points are not independent for this polynomial "
+                         "(more points at one command than its degree in p can pass through); "
+                         "use fewer points", source=source, location="pressure_gain")
 
 
 @dataclass(frozen=True)

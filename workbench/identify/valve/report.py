@@ -11,8 +11,9 @@ import numpy as np
 from ...errors import InputError, WorkbenchError
 from ._numeric import numeric as _numeric
 from .affine import AffineTableFit, fit_affine
-from .gain import (PressureGain, TableLaw, compare_pressure_gain, pressure_gain,
+from .gain import (PressureGain, TableLaw, compare_pressure_gain,
                    pressure_gain_from_data)
+from .gain import pressure_gain as _gain_curve
 from .polynomial import DegreeSelection, PolynomialValveFit, fit_polynomial, select_degrees
 from .table import ValveTable
 from .tank import TankStepTests, tank_steps
@@ -87,8 +88,12 @@ def analyse(table: ValveTable, approx: str = "both", degrees: tuple[int, int] | 
             pin_ends: bool = False, shared_psi: bool = False, phi_from: str = "fit",
             tank_volume: float = 1e-3, tank: bool = True,
             k: float = 1.2, seed: int = 0, reference: Callable | None = None,
-            reference_label: str = "generating valve") -> ValveFitReport:
+            reference_label: str = "generating valve", pressure_gain=None) -> ValveFitReport:
     """Fit approximation I and/or II, then the pressure gain and tank step validation.
+
+    ``pressure_gain``: measured blocked-port points (u in V, p_e in Pa) imposed on both
+    fits as q(p_e, u) = 0 (:mod:`.blocked`); with ``select`` the degrees are chosen on
+    the flow points, then the chosen polynomial is refitted with the constraints.
 
     The tank steps are at u_e = the table's command centre. Their reference is the
     true law when known (``reference``: a CasADi-traceable flow(p, u) such as
@@ -103,13 +108,16 @@ def analyse(table: ValveTable, approx: str = "both", degrees: tuple[int, int] | 
     if approx in ("I", "both"):
         if select:
             sel = select_degrees(table, seed=seed)
-            a1 = sel.fit
+            a1 = (sel.fit if pressure_gain is None else
+                  fit_polynomial(table, sel.n, sel.m, pressure_gain=pressure_gain))
         else:
             n, m = degrees if degrees is not None else (5, 10)
-            a1 = fit_polynomial(table, n, m)
+            a1 = fit_polynomial(table, n, m, pressure_gain=pressure_gain)
     if approx in ("II", "both"):
         a2 = fit_affine(table, *affine_degrees, pin_ends=pin_ends, shared_psi=shared_psi,
-                        phi_from=phi_from)
+                        phi_from=phi_from, pressure_gain=pressure_gain)
+    if pressure_gain is not None:
+        notes.append(f"{len(pressure_gain)} blocked-port points imposed as q(p_e, u) = 0")
     lo, hi = table.pressure_range
     gains: dict[str, PressureGain] = {"data": pressure_gain_from_data(table)}
     cu = np.unique(table.u)
@@ -121,7 +129,7 @@ def analyse(table: ValveTable, approx: str = "both", degrees: tuple[int, int] | 
         report_laws["approximation II"] = a2.flow
     ref_laws = {} if reference is None else {reference_label: reference}
     for lab, fl in {**ref_laws, **report_laws}.items():
-        gains[lab] = pressure_gain(fl, fine, (lo, hi), label=lab)
+        gains[lab] = _gain_curve(fl, fine, (lo, hi), label=lab)
     tests = None
     if tank:
         laws = {"data": TableLaw(table), **ref_laws, **report_laws}
