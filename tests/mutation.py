@@ -577,7 +577,7 @@ MUTATIONS: tuple[Mutation, ...] = (
     _m("replay-hold-next-command", "core", "workbench/replay.py",
        "sim.hold(state, float(u[k]), dt[k:j])", "sim.hold(state, float(u[j]), dt[k:j])",
        "hold runs apply the command after the run", CORE_REP),
-    _m("validate-band-min", "core", "workbench/validate.py",
+    _m("validate-band-min", "core", "workbench/specification.py",
        "return max(self.settling_band * abs(step_size), self.band_floor)",
        "return min(self.settling_band * abs(step_size), self.band_floor)",
        "settling band the smaller of relative band and floor", CORE_VAL),
