@@ -228,7 +228,8 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             s = plan.to_dict()
             rows.append([rule, s["p_min"] / 1e5, s["p_max"] / 1e5, s["level_min"] / 1e5,
                          s["level_max"] / 1e5, s["q_max"] * 1e3, s["air_mass"] * 1e3,
-                         s["command_mismatch"], "yes" if s["command_mismatch"] < 1e-6 else "no (two valves)",
+                         round(s["command_mismatch"], 6),   # to 1 uV: 8.9e-16 V is 0
+                         "yes" if s["command_mismatch"] < 1e-6 else "no (two valves)",
                          plan.feasible])
         done.append(rp.Section("Pressure-trajectory inversion", [
             rp.Paragraph(
@@ -318,7 +319,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             blocks.append(rp.Status("FAIL", f"{name}: simulation failed: {msg}"))
         if not quick:
             sweep_rows = []
-            for lam in SWEEP:
+            for lam in rp.progress(SWEEP, "bandwidth sweep"):
                 c = force_tracker(rig, lam, preview=profile, model=model)
                 try:
                     r_s = simulate.closed_loop(locked_extra, c, profile, t_end=duration,
@@ -350,7 +351,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         # the same seed draws the same factors on both plant variants (common random numbers)
         mc = {pname: monte_carlo(plant, mc_ctrls, n=n_mc, seed=MC_SEED,
                                  uncertainty=DEFAULT_UNCERTAINTY, judge=judge,
-                                 workers=1 if quick else None)
+                                 workers=1 if quick else None, progress=True)
               for pname, plant in mc_plants.items()}
         # the undrawn plants, for reference
         mc_nominal = {(pname, cname): judge(plant, make(plant))

@@ -176,7 +176,8 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                            prm["valve.command_max"])
         # PD: fl_position's candidates, the first that passes on the full plant
         tries = []
-        for kp, kd in (fl_position.PD_CANDIDATES[:1] if quick else fl_position.PD_CANDIDATES):
+        candidates = fl_position.PD_CANDIDATES[:1] if quick else fl_position.PD_CANDIDATES
+        for kp, kd in rp.progress(candidates, "PD candidate validated"):
             pd = PID(kp=kp, kd=kd, sample_time=T, u_center=u_c, u_min=u_lo, u_max=u_hi)
             v = validate.validate(full, pd, spec=spec, reference=ref, label="PD, full plant",
                                   progress=False)
@@ -218,6 +219,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                 if name == "PD" and where == "full":
                     runs[where][name] = v_pd_full
                     continue
+                rp.say(f"  {name} on the {where} plant ...")
                 runs[where][name] = validate.validate(plant, on[where][name], spec=spec,
                                                       reference=ref,
                                                       label=f"{name}, {where}", progress=False)
@@ -240,7 +242,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                           for i, (item, _, lim, unit, _) in enumerate(tables["PD"])]
             sections += [
                 rp.Heading(f"On {what}"),
-                rp.Table(head, rows, caption=f"Comparison on {what}; the ratio columns are "
+                rp.Table(head, rows, units=["", ""] + ["" if " / " not in h else "-"
+                                                       for h in head[2:]],   # ratios: one format
+                         caption=f"Comparison on {what}; the ratio columns are "
                                              "PD / controller: above 1 the controller is better "
                                              "(uses less) by that factor"),
                 rp.Table(["check", "limit", "unit", *vs], check_rows,
@@ -299,7 +303,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         for label, key, plant, unc in sets:
             t0 = time.perf_counter()
             res = monte_carlo(plant, factories["full" if plant is full else "nominal"], n=n_draws, seed=SEED, uncertainty=unc, spec=spec,
-                              reference=ref, workers=args.workers, progress=None)
+                              reference=ref, workers=args.workers, progress=True)
             mc[key] = res
             print(f"    Monte Carlo, {label}: "
                   + ", ".join(f"{n} {res.pass_rate(n):.0%}" for n in res.passed)

@@ -698,3 +698,19 @@ def test_pressure_plan_position_every_metric_from_its_csvs(plan_run):
         # the plan's force equation is met to rounding (N)
         assert 0.0 <= pl["force_residual"] < 1e-9 and pl["feasible"] is True
         assert pl["q_max"] > 0 and pl["air_mass"] > 0 and pl["saturated_fraction"] == 0.0
+
+
+def test_design_progress_goes_to_stderr_step_by_step(tmp_path, capsys):
+    # issue 15: long steps in the designs were silent (the force-tracking Monte Carlo
+    # for 126 s). Every step announces itself on stderr with the time of day, a step
+    # over 2 s says when it is done, results stay on stdout; one quick design (~3 s)
+    import re
+    mod = runpy.run_path(str(ROOT / "designs" / "pressure_plan_position.py"), run_name="design")
+    rc = mod["main"](["--quick", "--out", str(tmp_path / "out")])
+    cap = capsys.readouterr()
+    assert rc == 0
+    steps = re.findall(r"^\[\d\d:\d\d:\d\d\] (.+) \.\.\.$", cap.err, flags=re.M)
+    assert steps == ["plants", "pressure plans", "closed loop", "write report"]
+    done = re.findall(r"^\[\d\d:\d\d:\d\d\] (.+): done in (\d+\.\d) s$", cap.err, flags=re.M)
+    assert all(name in steps and float(s) > 2.0 for name, s in done)
+    assert "..." not in cap.out and "feedforward + feedback" in cap.out   # results on stdout

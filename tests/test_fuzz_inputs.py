@@ -104,6 +104,8 @@ def plant_variants(draw):
         action = draw(st.sampled_from(["scale", "scale", "effect", "effect", "set",
                                        "delete", "add", "section"]))
         section, key = draw(st.sampled_from(KEYS))
+        if action in ("scale", "set", "delete") and not isinstance(data.get(section), dict):
+            continue                     # an earlier "section" edit replaced the table
         if action == "scale" and isinstance(data[section].get(key), float):
             data[section][key] *= draw(st.floats(0.5, 2.0))
         elif action == "effect":

@@ -12,6 +12,7 @@ import re
 import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,3 +74,104 @@ def test_readme_pd_without_the_valve_centre_is_refused():
     with pytest.raises(InputError, match=r"u_center = 0 V opens the valve by 100 % .* "
                                          r"end stop"):
         validate.validate(plant, pd, progress=False)
+
+
+# ----------------------------------------------------------- recordings: the README's table
+# The README's recordings section documents what is accepted and what is refused with
+# which hint (formats.md, shared, does not): every row of its table is built here and
+# loaded through the command line's own options (``simulate``'s parser, which every
+# command that reads a recording shares), against the plant the README names.
+
+PLANT = ROOT / "designs/plants/rig25_mpye.toml"
+_N = 200
+_T = np.arange(_N) * 1e-3                                 # s, 1 ms steps
+_U = 5.0 + 0.5 * np.sin(30.0 * _T)                        # V
+_X = 0.2 + 0.01 * np.sin(30.0 * _T)                       # m
+_PA = 3.0e5 + 1.0e4 * np.sin(30.0 * _T)                   # Pa
+_BAR, _ATM = 1e5, 101325.0
+
+
+def _csv(path: Path, header: str, cols, meta: str = "", trailing: str = "") -> Path:
+    rows = (",".join(f"{v:.12g}" for v in row) + trailing for row in zip(*cols))
+    path.write_text(meta + header + "\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    return path
+
+
+#: README first cell -> (header, columns, metadata lines, extra options, trailing text).
+RECORDING_CASES = {
+    "header `t,u,x [mm],p_a [bar]`": ("t,u,x [mm],p_a [bar]", (_T, _U, _X * 1e3, _PA / _BAR), "", []),
+    "header `t [ms],u,x (mm)`": ("t [ms],u,x (mm)", (_T * 1e3, _U, _X * 1e3), "", []),
+    "`# units: t=ms, x=mm, p_a=bar_g`": ("t,u,x,p_a", (_T * 1e3, _U, _X * 1e3, (_PA - _ATM) / _BAR),
+                                         "# units: t=ms, x=mm, p_a=bar_g\n", []),
+    "header `time,cmd,pos_mm` with `--columns t=time,u=cmd,x=pos_mm:mm`":
+        ("time,cmd,pos_mm", (_T, _U, _X * 1e3), "", ["--columns", "t=time,u=cmd,x=pos_mm:mm"]),
+    "header `t,u,x,` (trailing delimiters)": ("t,u,x,", (_T, _U, _X), "", [], ","),
+    "`--window 0.05:0.15`": ("t,u,x", (_T, _U, _X), "", ["--window", "0.05:0.15"]),
+    "t in ms, not declared": ("t,u,x", (_T * 1e3, _U, _X), "", []),
+    "t jumps by 1 s after t = 0.1 s": ("t,u,x", (np.where(_T > 0.1, _T + 1.0, _T), _U, _X), "", []),
+    "`# sample_time: 0.01` over 1 ms steps": ("t,u,x", (_T, _U, _X), "# sample_time: 0.01\n", []),
+    "u in mV, not declared": ("t,u,x", (_T, _U * 1e3, _X), "", []),
+    "x in mm, not declared": ("t,u,x", (_T, _U, _X * 1e3), "", []),
+    "x = 0.6 m on the 0.5 m stroke": ("t,u,x", (_T, _U, _X + 0.4), "", []),
+    "u = 12.5 V on the 0..10 V valve": ("t,u,x", (_T, _U + 7.5, _X), "", []),
+    "p_a in bar, not declared": ("t,u,x,p_a", (_T, _U, _X, _PA / _BAR), "", []),
+    "header `t,u,x [inch]`": ("t,u,x [inch]", (_T, _U, _X / 0.0254), "", []),
+    "header `t,u,x [mm]` and `# units: x=cm`": ("t,u,x [mm]", (_T, _U, _X * 1e3), "# units: x=cm\n", []),
+    "`--columns x:mm`": ("t,u,x", (_T, _U, _X), "", ["--columns", "x:mm"]),
+    "`--columns pos=x`": ("t,u,x", (_T, _U, _X), "", ["--columns", "pos=x"]),
+    "`--columns x=pos_mm:mm` on a file without `pos_mm`": ("t,u,x", (_T, _U, _X), "",
+                                                          ["--columns", "x=pos_mm:mm"]),
+    "`--window 0.15:0.05`": ("t,u,x", (_T, _U, _X), "", ["--window", "0.15:0.05"]),
+    "`--window 5:6` (the file spans 0 .. 0.199 s)": ("t,u,x", (_T, _U, _X), "", ["--window", "5:6"]),
+}
+
+
+def _recording_rows() -> list[tuple[str, str]]:
+    start = README.index("| the file or the command line | result |")
+    rows = []
+    for line in README[start:].splitlines()[2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        rows.append((cells[0], cells[1]))
+    return rows
+
+
+def test_every_documented_recording_case_is_tested_here():
+    assert [r for r, _ in _recording_rows()] == list(RECORDING_CASES)
+
+
+@pytest.mark.parametrize("case, result", _recording_rows(), ids=lambda v: v[:40])
+def test_recording_case_as_the_readme_says(case, result, tmp_path, capsys):
+    from workbench.cli import build_parser
+    from workbench.cli.recording_args import load_from_args
+    from workbench.errors import InputError
+    from workbench.params import PlantParams
+    header, cols, meta, extra, *trailing = RECORDING_CASES[case]
+    path = _csv(tmp_path / "rec.csv", header, cols, meta, *trailing)
+    argv = ["simulate", str(PLANT), str(path), "--out", str(tmp_path / "out"), *extra]
+    plant = PlantParams.from_toml(PLANT)
+    if result.startswith("accepted"):
+        rec = load_from_args(build_parser().parse_args(argv), path, plant=plant)
+        keep = (_T >= 0.05) & (_T <= 0.15) if "--window" in extra else np.ones(_N, bool)
+        assert len(rec) == keep.sum()
+        if "samples" in result:                               # "accepted: 101 samples"
+            assert len(rec) == int(re.search(r"(\d+) samples", result).group(1))
+        # in SI whatever the file's units: the arrays written above, to the 12 digits written
+        for name, want in (("t", _T), ("u", _U), ("x", _X), ("p_a", _PA)):
+            if name in rec.columns:
+                np.testing.assert_allclose(rec[name], want[keep], rtol=1e-10, atol=1e-12)
+        return
+    hint = re.fullmatch(r'refused: "(.+)"', result).group(1)
+    try:
+        load_from_args(build_parser().parse_args(argv), path, plant=plant)
+    except InputError as exc:
+        message = str(exc)
+    except SystemExit as exc:                                 # refused by the parser
+        assert exc.code == 2
+        message = capsys.readouterr().err
+    else:
+        pytest.fail(f"{case}: accepted, the README says {result}")
+    assert hint in message, message
+    if "outside the" in hint:          # 0.6 m / 12.5 V are no factor-1000 slip: no unit hint
+        assert "mm?" not in message and "mV?" not in message, message

@@ -542,3 +542,61 @@ def test_subnormal_numbers_format_and_read_back(x):
     from workbench.report.document import _fmt_float
     text = _fmt_float(x, 4)
     assert float(text) == pytest.approx(x, rel=1e-3)   # 4 significant digits
+
+
+# --------------------------------------------------------------------------- progress
+
+class _Clock:
+    """A fake ``time.perf_counter``: each item of work advances it by a set time."""
+
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def _lines(text: str) -> list[str]:
+    return [ln.split("] ", 1)[1] for ln in text.splitlines()]
+
+
+def test_progress_never_silent_longer_than_its_interval(monkeypatch, capsys):
+    from workbench.report import design as rd
+    clock = _Clock()
+    monkeypatch.setattr(rd.time, "perf_counter", clock)
+    # items of 0.9 s: a line after items 3, 6, 9 (>= 2 s since the last) and after the last
+    for _ in rd.progress(range(10), "draw"):
+        clock.now += 0.9
+    err = capsys.readouterr()
+    assert err.out == ""                                 # progress is on stderr only
+    assert _lines(err.err) == ["  draw 3/10 (2.7 s)", "  draw 6/10 (5.4 s)",
+                               "  draw 9/10 (8.1 s)", "  draw 10/10 (9.0 s)"]
+
+
+def test_progress_quiet_for_quick_loops_and_counts_without_a_length(monkeypatch, capsys):
+    from workbench.report import design as rd
+    clock = _Clock()
+    monkeypatch.setattr(rd.time, "perf_counter", clock)
+    for _ in rd.progress(range(5), "item"):
+        clock.now += 0.1                                 # 0.5 s in all: no line
+    assert capsys.readouterr().err == ""
+    for _ in rd.progress((k for k in range(2)), "run"):
+        clock.now += 2.5                                 # no len(): "k" without "/N"
+    assert _lines(capsys.readouterr().err) == ["  run 1 (2.5 s)", "  run 2 (5.0 s)"]
+
+
+def test_step_announces_itself_and_its_end_on_stderr(monkeypatch, capsys):
+    from workbench.report import design as rd
+    clock = _Clock()
+    monkeypatch.setattr(rd.time, "perf_counter", clock)
+    with rd.step("quick step"):
+        clock.now += 0.5
+    with rd.step("slow step"):
+        clock.now += 3.25
+    err = capsys.readouterr()
+    assert err.out == ""
+    assert _lines(err.err) == ["quick step ...", "slow step ...", "slow step: done in 3.2 s"]
+    with pytest.raises(ValueError) as info:              # a failing step names itself
+        with rd.step("broken", quiet=True):
+            raise ValueError("x")
+    assert info.value.design_step == "broken" and capsys.readouterr().err == ""

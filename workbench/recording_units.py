@@ -330,8 +330,10 @@ def check_against_plant(data: Mapping[str, np.ndarray], params: Any, source: str
             continue
         i = int(np.flatnonzero(bad)[0])
         lo, hi = float(y.min()), float(y.max())
-        hint = ""
-        if low <= lo * 1e-3 and hi * 1e-3 <= high:
+        hint = ""                # a factor-1000 slip: the values fit when divided by 1000
+        reach = max(abs(low), abs(high))     # and lie far beyond the range (x = 0.6 m on
+        if (low <= lo * 1e-3 and hi * 1e-3 <= high     # a 0.5 m stroke is no mm slip)
+                and max(abs(lo), abs(hi)) > 10.0 * reach):
             hint = f"; in {small}? {_declare(name, small)}"
         raise InputError(f"{float(y[i]):.6g} {unit} is outside {what} (the column spans "
                          f"{lo:.6g}..{hi:.6g} {unit}, {int(bad.sum())} of {y.size} samples "

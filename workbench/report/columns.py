@@ -15,6 +15,9 @@ Rules the renderers share (both :mod:`.html` and :mod:`.pdf` use them, through
   (``"0.00084788"``, ``"<= 16.75"``, ``"inf"``, ``"8.6447 FAIL"``) is formatted
   with its column, so a design that formatted values itself still gets one
   format per column.
+* **A table of quantities** (a ``unit`` column naming several units, one quantity
+  per row): a number column without a unit of its own gets one format per unit,
+  a column with a unit in the header row (a ratio, ``"-"``) one format for all.
 * **One status vocabulary.** ``PASS``/``FAIL`` (and ``NOTE``/``ERROR`` in
   banners); ``"passed"``, ``"PASSED"``, ``"fail"``, ``"FAILED"`` ... are accepted and
   shown as ``PASS``/``FAIL``.
@@ -245,7 +248,9 @@ def _quantity_per_row(columns: Sequence[str], cols: list[list]) -> list[str] | N
     Such a table lists a different quantity in each row (a paper's results: a
     velocity, a pressure, a pole), so a number column holds several quantities: its
     numbers share one format per quantity (rows of the same unit), not one for the
-    whole column, where a pressure of 6e5 Pa would force 0.7 m/s into 7.000e-1.
+    whole column, where a pressure of 6e5 Pa would force 0.7 m/s into 7.000e-1. A
+    column with a unit of its own in the header row (a ratio, ``"-"``) is one
+    quantity and keeps one format (:func:`table_view`).
     """
     for j, name in enumerate(columns):
         if str(name).strip().lower() in ("unit", "units"):
@@ -277,7 +282,10 @@ def table_view(columns: Sequence[str], units: Sequence[str] | None, rows: Sequen
     groups = _quantity_per_row(columns, cols)
     for j in keep:
         kinds.append(_column_kind(cols[j]))
-        t, v = _column_texts(cols[j], digits, groups)
+        # a column whose header gives its own unit (a ratio "-", a count) holds one
+        # quantity in every row: one format for it, whatever the unit column says
+        own_unit = units is not None and bool(str(units[j]).strip())
+        t, v = _column_texts(cols[j], digits, None if own_unit else groups)
         texts.append(t)
         values.append(v)
     unit_row = None if units is None else tuple(keep_formulas(units[j]) for j in keep)
