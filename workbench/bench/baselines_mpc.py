@@ -28,7 +28,8 @@ from ..controllers.mpc.model import V_SCALE
 from ..controllers.mpc.update import admissible
 from ..integrate.jit import compiled
 
-__all__ = ["PlainRTI", "ipopt_gauss_newton", "do_mpc_recommended", "osqp_unavailable"]
+__all__ = ["PlainRTI", "ipopt_gauss_newton", "do_mpc_recommended", "osqp_unavailable",
+           "cost_hessian"]
 
 
 def osqp_unavailable() -> str | None:
@@ -77,6 +78,20 @@ class _Shifted:
         return None
 
 
+def cost_hessian(nlp: dict, P: np.ndarray, regularisation: float) -> ca.DM:
+    """The Hessian of the NLP's cost (constant: the cost is quadratic) + regularisation I.
+
+    It holds the weights, which are parameters (the settings P at the end of p): it is
+    evaluated at the settings. (Evaluated at p = 0 it lacked the weights: the QP was an
+    LP, which OSQP did not solve in 4000 iterations at 250 of 300 samples.)
+    """
+    w, p, f = nlp["x"], nlp["p"], nlp["f"]
+    nw = w.shape[0]
+    p0 = np.concatenate([np.zeros(p.shape[0] - P.size), P])
+    H = ca.Function("h", [w, p], [ca.hessian(f, w)[0]])(np.zeros(nw), p0)
+    return H + regularisation * ca.DM.eye(nw)            # strictly convex
+
+
 class PlainRTI(_Shifted):
     """Gauss-Newton real-time iteration: one sparse QP per sample, the model's interval
     sensitivities (``pb.Fj``) in the constraint Jacobian.
@@ -100,13 +115,7 @@ class PlainRTI(_Shifted):
         nw = w.shape[0]
         lin = ca.Function("wb_rti_lin", [w, p], [ca.gradient(f, w), g, self._jacobian(w, p, g)])
         self.lin = compiled(lin)            # MX: the interval map's derivatives mapped, not unrolled
-        # the cost's Hessian is constant in w but holds the weights, which are in the
-        # parameters (the settings P at their end): evaluated at the settings (it
-        # was evaluated at p = 0 once, i.e. without weights: an LP, which OSQP did
-        # not solve in 4000 iterations at 250 of 300 samples)
-        p0 = np.concatenate([np.zeros(p.shape[0] - self.pb.P.size), self.pb.P])
-        H = ca.Function("h", [w, p], [ca.hessian(f, w)[0]])(np.zeros(nw), p0)
-        self.H = H + regularisation * ca.DM.eye(nw)       # constant; strictly convex
+        self.H = cost_hessian(self.nlp, self.pb.P, regularisation)
         self.kind, self.failures, self.inaccurate, self.nw = qp, 0, 0, nw
         self._y: np.ndarray | None = None
         sa = self.lin.sparsity_out(2)

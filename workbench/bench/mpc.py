@@ -135,6 +135,29 @@ def _baselines(nmpc_vm) -> tuple[dict, dict]:
     return ctrls, missing
 
 
+def _alone(plant, rti, nmpc, ref, duration: float, plain_from) -> dict:
+    """Our RTI and the plain RTI each run alone over the same closed loop.
+
+    In lockstep every controller starts its sample with caches cold from the others
+    (IPOPT, do-mpc); a controller on its own core does not. Each here runs in a loop of
+    its own (only the plant's integration in between): the time per sample it would
+    have on a controller, and the ratio of the two under that condition.
+    """
+    out = {"note": "each controller alone in its closed loop (caches warm from its own "
+                   "previous sample); the headline median_s is from the lockstep run"}
+    runs = {"rti": lockstep(plant, {"rti": rti}, ref, duration, nmpc)["rti"]}
+    if plain_from is not None:
+        from .baselines_mpc import PlainRTI
+        runs["plain_rti_osqp"] = lockstep(plant, {"p": PlainRTI(plain_from)}, ref, duration,
+                                          nmpc)["p"]
+    for k, run in runs.items():
+        sc = _scores(run, nmpc, nmpc.sample_time)
+        out[k] = {q: sc[q] for q in ("median_s", "cpu_median_s", "cpu_p99_ms", "cost")}
+    if "plain_rti_osqp" in out:
+        out["ratio_plain_rti_osqp"] = out["plain_rti_osqp"]["median_s"] / out["rti"]["median_s"]
+    return out
+
+
 def _compiled(ctrls: dict, jit: bool) -> tuple[dict, str | None]:
     """The controllers as :class:`~workbench.controllers.mpc.fast.CompiledNMPC` (the
     whole sample one C call), or as they are and why not (no compiler, ``jit`` off)."""
@@ -186,6 +209,11 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
                               valid=bool(getattr(ctrls[name], "failures", 0) == 0
                                          and sc[name]["cost"] < 1.1 * mine["cost"]))
     head = sc["rti"]
+    alone = _alone(plant, ours["rti"], nmpc, ref, duration,
+                   None if "plain_rti_osqp" in missing else nmpc.with_settings(jit=False))
+    from .mpc_variants import variants
+    var = variants(plant, ref, min(duration, 5.0), nmpc,
+                   lambda c: _compiled({"c": c}, jit)[0]["c"], lockstep, _scores)
     return {"benchmark": "mpc", **{k: head[k] for k in ("median_s", "cpu_median_s", "spread",
                                                         "cpu_p99_ms", "p99_ms", "cost")},
             "error": head["cost"] / sc["sqp"]["cost"] - 1.0,
@@ -201,11 +229,17 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
                                "description": "the same NMPC through NMPC.update (Python "
                                               "around the compiled step)"},
             "rti_breakdown": rti_breakdown(nmpc, runs["rti_uncompiled"]),
+            "alone": alone, "variants": var,
+            "variants_note": "friction, deadband and line versions of the prediction model "
+                             "(bench.mpc_variants), each in lockstep with the 4-state model "
+                             "on the variant plant for min(simulated_s, 5 s); ratio = "
+                             "variant median / 4-state median",
             "plant": BENCH_PLANT, "horizon": nmpc.horizon, "sample_time_s": nmpc.sample_time,
             "simulated_s": duration, "samples": len(runs["rti"]["wall"]), "jit": jit,
             "build_s": build, "qp_solver": nmpc.qp_solver,
             "target": {"median_s": 0.15e-3, "cpu_p99_ms": 0.5,
-                       "ratio_plain_rti_osqp": 10.0, "cost_vs_converged": 0.01},
+                       "ratio_plain_rti_osqp": 10.0, "cost_vs_converged": 0.01,
+                       "variants_ratio": 3.0},
             "machine": machine()}
 
 
