@@ -89,6 +89,8 @@ def test_bench_simulate_case_schema_and_accuracy():
     assert res["accuracy_bound_m"] == bound
     assert res["within_bound"] and res["error"] < bound
     assert res["realtime_factor"] == pytest.approx(1.0 / res["median_s"])
+    assert res["realtime_factor_cpu"] == pytest.approx(1.0 / res["cpu_median_s"])
+    assert res["wall_over_cpu"] == pytest.approx(res["median_s"] / res["cpu_median_s"])
     assert res["steps"] >= 100 and res["native"] in (True, False)
     for name in ("cvodes_mapaccum", "rk4_compiled"):
         row = res["baselines"][name]
@@ -115,3 +117,27 @@ def test_bench_mpc_lockstep_scores():
     # the piston rests, then holds): finite and >= 0; IAE <= duration x largest error
     assert 0.0 <= sc["cost"] < np.inf
     assert sc["iae_m_s"] <= 0.3 * sc["max_error_m"] + 1e-12
+
+
+def test_plain_rti_baseline_has_the_cost_weights():
+    # The plain RTI's QP Hessian once lacked the cost weights (evaluated with the
+    # parameters at 0: an LP OSQP could not solve). Its diagonal at node k's position
+    # and velocity must be the weights (L / position_tolerance)^2 and
+    # (1 m/s / velocity_tolerance)^2 (x terminal_factor at node N), computed here from
+    # the settings; node 0 and the pressures carry no cost (the regularisation only).
+    from workbench import Plant
+    from workbench.bench.baselines_mpc import cost_hessian
+    from workbench.controllers.mpc import NMPC
+    plant = Plant.from_toml("designs/plants/rig25_mpye.toml")
+    nmpc = NMPC.for_plant(plant, horizon=5, sample_time=0.01, disturbance_gain=0.0,
+                          jit=False)
+    pb = nmpc._problem
+    d = np.asarray(cost_hessian(pb.ipopt._nlp(), pb.P, 1e-8).full()).diagonal()
+    wx = (plant.stroke / nmpc.position_tolerance) ** 2
+    wv = (1.0 / nmpc.velocity_tolerance) ** 2
+    for k in range(1, 6):
+        f = nmpc.terminal_factor if k == 5 else 1.0
+        assert d[4 * k] == pytest.approx(f * wx + 1e-8, rel=1e-12)
+        assert d[4 * k + 1] == pytest.approx(f * wv + 1e-8, rel=1e-12)
+        assert d[4 * k + 2] == d[4 * k + 3] == pytest.approx(1e-8, rel=1e-12)
+    assert d[0] == pytest.approx(1e-8, rel=1e-12)

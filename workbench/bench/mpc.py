@@ -101,8 +101,9 @@ def _scores(run: dict, nmpc, T: float) -> dict[str, Any]:
 
 
 _DESCRIPTIONS = {
-    "plain_rti_osqp": "Gauss-Newton RTI on the same NLP, sparse QP by OSQP (eps 1e-4, "
-                      "polished, warm started), Jacobians generated as C; one QP per sample",
+    "plain_rti_osqp": "Gauss-Newton RTI on the same NLP, sparse (uncondensed) QP by OSQP "
+                      "(eps 1e-6, polished, default rho and scaling, warm started with the "
+                      "multipliers shifted), Jacobians generated as C; one QP per sample",
     "ipopt_gauss_newton": "IPOPT to convergence on the same NLP, Gauss-Newton Hessian "
                           "(hess_lag), expanded to SX, warm-started primal and dual",
     "do_mpc_recommended": "do-mpc 5 on the same problem (collocation), IPOPT with expand and "
@@ -134,12 +135,47 @@ def _baselines(nmpc_vm) -> tuple[dict, dict]:
     return ctrls, missing
 
 
+def _alone(plant, rti, nmpc, ref, duration: float, plain_from) -> dict:
+    """Our RTI and the plain RTI each run alone over the same closed loop.
+
+    In lockstep every controller starts its sample with caches cold from the others
+    (IPOPT, do-mpc); a controller on its own core does not. Each here runs in a loop of
+    its own (only the plant's integration in between): the time per sample it would
+    have on a controller, and the ratio of the two under that condition.
+    """
+    out = {"note": "each controller alone in its closed loop (caches warm from its own "
+                   "previous sample); the headline median_s is from the lockstep run"}
+    runs = {"rti": lockstep(plant, {"rti": rti}, ref, duration, nmpc)["rti"]}
+    if plain_from is not None:
+        from .baselines_mpc import PlainRTI
+        runs["plain_rti_osqp"] = lockstep(plant, {"p": PlainRTI(plain_from)}, ref, duration,
+                                          nmpc)["p"]
+    for k, run in runs.items():
+        sc = _scores(run, nmpc, nmpc.sample_time)
+        out[k] = {q: sc[q] for q in ("median_s", "cpu_median_s", "cpu_p99_ms", "cost")}
+    if "plain_rti_osqp" in out:
+        out["ratio_plain_rti_osqp"] = out["plain_rti_osqp"]["median_s"] / out["rti"]["median_s"]
+    return out
+
+
+def _compiled(ctrls: dict, jit: bool) -> tuple[dict, str | None]:
+    """The controllers as :class:`~workbench.controllers.mpc.fast.CompiledNMPC` (the
+    whole sample one C call), or as they are and why not (no compiler, ``jit`` off)."""
+    from ..controllers.mpc.fast import CompiledNMPC, compiled_unavailable
+    why = "jit off: the NMPC as it is" if not jit else compiled_unavailable()
+    if why:
+        return dict(ctrls), why
+    return {k: CompiledNMPC(c) for k, c in ctrls.items()}, None
+
+
 def bench(quick: bool = False, jit: bool = True, duration: float | None = None) -> dict:
     """NMPC time per sample, ours against the plain baselines, all in lockstep.
 
     Horizon 20 samples of 10 ms on ``designs/plants/rig25_mpye.toml`` (4 states), the
     validation profile compressed to 20 s (``quick``: its first 3 s), disturbance
-    observer off (the baselines have none). Ours runs twice: RTI (the headline:
+    observer off (the baselines have none). Ours runs twice, each sample one compiled C
+    call (:mod:`workbench.controllers.mpc.fast`; as ``rti_uncompiled`` also through
+    ``NMPC.update``, for comparison): RTI (the headline:
     ``median_s`` per sample, ``cpu_p99_ms``, ``cost``) and SQP to convergence (at most
     5 steps per sample, ``converged``). Each baseline's ``ratio`` is its median over
     that of ours in the same class (RTI vs RTI, converged vs converged); ``error`` is
@@ -152,8 +188,10 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
     ref = bench_reference(plant, 20.0)
     t0 = time.perf_counter()
     nmpc = NMPC.for_plant(plant, horizon=20, sample_time=0.01, disturbance_gain=0.0, jit=jit)
+    sqp = nmpc.with_settings(mode="sqp", max_iterations=5)
+    ours, why = _compiled({"rti": nmpc, "sqp": sqp}, jit)
     build = time.perf_counter() - t0
-    ours = {"rti": nmpc, "sqp": nmpc.with_settings(mode="sqp", max_iterations=5)}
+    ours["rti_uncompiled"] = nmpc
     ctrls, missing = _baselines(nmpc.with_settings(jit=False))
     runs = lockstep(plant, {**ours, **ctrls}, ref, duration, nmpc)
     sc = {k: _scores(v, nmpc, nmpc.sample_time) for k, v in runs.items()}
@@ -171,18 +209,37 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
                               valid=bool(getattr(ctrls[name], "failures", 0) == 0
                                          and sc[name]["cost"] < 1.1 * mine["cost"]))
     head = sc["rti"]
+    alone = _alone(plant, ours["rti"], nmpc, ref, duration,
+                   None if "plain_rti_osqp" in missing else nmpc.with_settings(jit=False))
+    from .mpc_variants import variants
+    var = variants(plant, ref, min(duration, 5.0), nmpc,
+                   lambda c: _compiled({"c": c}, jit)[0]["c"], lockstep, _scores)
     return {"benchmark": "mpc", **{k: head[k] for k in ("median_s", "cpu_median_s", "spread",
                                                         "cpu_p99_ms", "p99_ms", "cost")},
             "error": head["cost"] / sc["sqp"]["cost"] - 1.0,
             "error_note": "closed-loop cost of RTI relative to ours converged (SQP) - 1",
             "iae_m_s": head["iae_m_s"], "max_error_m": head["max_error_m"],
             "converged": sc["sqp"], "baselines": rows,
-            "rti_breakdown": rti_breakdown(nmpc, runs["rti"]),
+            "compiled_sample": why is None,
+            "compiled_sample_note": why or ("ours (rti, sqp) run the whole sample as one "
+                                            "compiled C call (controllers.mpc.fast)"),
+            "rti_uncompiled": {**sc["rti_uncompiled"],
+                               "ratio": sc["rti_uncompiled"]["median_s"] / head["median_s"],
+                               "cost_difference": sc["rti_uncompiled"]["cost"] / head["cost"] - 1.0,
+                               "description": "the same NMPC through NMPC.update (Python "
+                                              "around the compiled step)"},
+            "rti_breakdown": rti_breakdown(nmpc, runs["rti_uncompiled"]),
+            "alone": alone, "variants": var,
+            "variants_note": "friction, deadband and line versions of the prediction model "
+                             "(bench.mpc_variants), each in lockstep with the 4-state model "
+                             "on the variant plant for min(simulated_s, 5 s); ratio = "
+                             "variant median / 4-state median",
             "plant": BENCH_PLANT, "horizon": nmpc.horizon, "sample_time_s": nmpc.sample_time,
             "simulated_s": duration, "samples": len(runs["rti"]["wall"]), "jit": jit,
             "build_s": build, "qp_solver": nmpc.qp_solver,
             "target": {"median_s": 0.15e-3, "cpu_p99_ms": 0.5,
-                       "ratio_plain_rti_osqp": 10.0, "cost_vs_converged": 0.01},
+                       "ratio_plain_rti_osqp": 10.0, "cost_vs_converged": 0.01,
+                       "variants_ratio": 3.0},
             "machine": machine()}
 
 

@@ -66,7 +66,8 @@ def source_digest(source: bytes, flags: Sequence[str]) -> str:
 
 
 def shared_library(name: str, source: str | bytes,
-                   flag_sets: Sequence[Sequence[str]] = (("-O2",),)) -> tuple[Path, bool]:
+                   flag_sets: Sequence[Sequence[str]] = (("-O2",),),
+                   libs: Sequence[str] = ()) -> tuple[Path, bool]:
     """Build C ``source`` into ``cache_dir()/{name}_{digest}.so`` unless it is there.
 
     Parameters
@@ -75,6 +76,8 @@ def shared_library(name: str, source: str | bytes,
     source : the C source.
     flag_sets : compiler flag sets, tried in turn until one compiles (the first one
         names the cache entry); ``-shared -fPIC`` and ``-lm`` are always added.
+    libs : libraries (paths of static archives, or ``-l`` flags) linked after the
+        source, in this order; part of the cache key.
 
     Returns
     -------
@@ -87,7 +90,7 @@ def shared_library(name: str, source: str | bytes,
     """
     src = source.encode() if isinstance(source, str) else source
     target_dir = cache_dir()
-    target = target_dir / f"{name}_{source_digest(src, flag_sets[0])}.so"
+    target = target_dir / f"{name}_{source_digest(src, [*flag_sets[0], *libs])}.so"
     if target.exists():
         return target, True
     cc = c_compiler()
@@ -99,7 +102,7 @@ def shared_library(name: str, source: str | bytes,
         c_file.write_bytes(src)
         err = "?"
         for flags in flag_sets:
-            cmd = [*cc, "-shared", "-fPIC", *flags, "-o", str(partial), str(c_file), "-lm"]
+            cmd = [*cc, "-shared", "-fPIC", *flags, "-o", str(partial), str(c_file), *libs, "-lm"]
             try:
                 proc = subprocess.run(cmd, capture_output=True, text=True)
             except OSError as exc:

@@ -28,15 +28,18 @@ import numpy as np
 __all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver"]
 
 
-def sqp_step(pb) -> ca.Function:
+def sqp_step(pb, jit: bool | None = None) -> ca.Function:
     """One Gauss-Newton SQP step as a single call: prep (C), QP, post (C).
 
     Parameters
     ----------
     pb : workbench.controllers.mpc.problem.Problem
-        Dimensions, scaling, limits and interval maps; ``pb.c.jit`` compiles prep
-        and post to C (:func:`workbench.integrate.jit.compiled`), ``pb.c.qp_solver``
-        names the conic plugin.
+        Dimensions, scaling, limits and interval maps; ``pb.c.qp_solver`` names the
+        conic plugin.
+    jit : bool, optional
+        Compile prep and post to C (:func:`workbench.integrate.jit.compiled`);
+        default ``pb.c.jit``. False keeps the whole step generatable as C source
+        (:mod:`.fast` generates it with the QP solver).
 
     Returns
     -------
@@ -51,7 +54,7 @@ def sqp_step(pb) -> ca.Function:
         estimate used.
     """
     prep, post = prepare(pb), apply_step(pb)
-    if pb.c.jit:
+    if pb.c.jit if jit is None else jit:
         from ...integrate.jit import compiled
         prep, post = compiled(prep), compiled(post)
     qp = qp_solver(pb.c.qp_solver, pb.N + pb.ns, 2 * pb.N * len(pb.soft))

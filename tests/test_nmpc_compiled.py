@@ -1,0 +1,117 @@
+"""The NMPC sample as one compiled C call (workbench.controllers.mpc.fast) against the
+NMPC itself (workbench.controllers.mpc.update): same plans on a closed loop.
+
+Speed is measured by ``workbench bench mpc``, not here. A short horizon (N = 5) keeps
+the C source small (compiled once per cache, ~10 s on a loaded machine).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench import Plant
+from workbench.controllers.mpc import NMPC
+from workbench.controllers.mpc.fast import CompiledNMPC, compiled_unavailable
+from workbench.errors import InputError
+from workbench.simulate import Simulator
+
+ROOT = Path(__file__).resolve().parents[1]
+RIG25 = ROOT / "designs" / "plants" / "rig25_mpye.toml"
+NAMES = ("x", "v", "p_a", "p_b")
+
+pytestmark = pytest.mark.skipif(compiled_unavailable() is not None,
+                                reason=f"compiled NMPC step: {compiled_unavailable()}")
+
+
+@pytest.fixture(scope="module")
+def rig25():
+    return Plant.from_toml(RIG25)
+
+
+@pytest.fixture(scope="module")
+def nmpc(rig25):
+    # the force observer on (its estimate is part of the memory compared), N = 5
+    return NMPC.for_plant(rig25, horizon=5, sample_time=0.01, jit=False)
+
+
+@pytest.fixture(scope="module")
+def fast(nmpc):
+    return CompiledNMPC(nmpc)
+
+
+def _reference(k: int) -> float:
+    """m on the 0.5 m stroke: hold, a 100 mm step (a jump: held over the horizon), a
+    0.1 m/s ramp (extrapolated), then a step to 0.47 m and a 0.3 m/s ramp through the
+    stroke margin (0.49 m) to beyond the stroke (projected onto the margin, velocity 0)."""
+    if k < 5:
+        return 0.10
+    if k < 50:
+        return 0.20
+    if k < 90:
+        return 0.20 + 0.1 * 0.01 * (k - 50)
+    if k < 120:
+        return 0.47
+    return 0.47 + 0.3 * 0.01 * (k - 120)
+
+
+def _compare(rig25, ours, ref, samples: int) -> float:
+    """Largest difference of plan, command, force estimate and iterations over a closed
+    loop driven by the reference NMPC, both fed the same measurements."""
+    sim = Simulator(rig25)
+    idx = [rig25.state_index(k) for k in NAMES]
+    x = rig25.initial_state(0.10)
+    sa = sf = None
+    worst = 0.0
+    for k in range(samples):
+        y = {n: float(x[i]) for n, i in zip(NAMES, idx)}
+        r = _reference(k)
+        sa, ua = ref.update(sa, r, y)
+        sf, uf = ours.update(sf, r, y)
+        worst = max(worst, float(np.max(np.abs(np.asarray(sa.X) - sf.X))),
+                    float(np.max(np.abs(np.asarray(sa.U).ravel() - sf.U))),
+                    abs(ua - uf), abs(sa.d - sf.d) / 100.0, abs(sa.u_prev - sf.u_prev))
+        info = ours.info(sf)
+        assert info.iterations == sa.info.iterations and info.success == sa.info.success
+        assert info.restarted == sa.info.restarted
+        x = sim.step(x, float(np.clip(ua, 0.0, 10.0)), 0.01)[-1]
+    return worst
+
+
+def test_compiled_rti_gives_the_same_plans(rig25, nmpc, fast):
+    # Same arithmetic in the same order (the step is the same CasADi graph, DAQP the
+    # same C library): equal to rounding; 1e-8 (scaled units, force / 100 N) leaves
+    # room for a compiler that contracts multiply-adds, and a wrong node reference,
+    # shift or estimate differs by > 1e-3.
+    assert _compare(rig25, fast, nmpc, 140) <= 1e-8
+
+
+def test_compiled_sqp_gives_the_same_plans(rig25, nmpc, fast):
+    # mode and iteration limit are settings of the same library (no second compile)
+    sqp = nmpc.with_settings(mode="sqp", max_iterations=4)
+    assert _compare(rig25, CompiledNMPC(sqp), sqp, 60) <= 1e-8
+
+
+def test_compiled_memory_reports_the_last_sample(rig25, fast):
+    y = {"x": 0.2, "v": 0.0, "p_a": 4e5, "p_b": 4e5}
+    mem, u = fast.update(None, 0.25, y)
+    assert fast.info(mem).success and fast.info(mem).iterations >= 1
+    # the plan starts at the measured state, its first command is the one applied
+    assert np.allclose(mem.X[:, 0] * fast.pb.sx, [0.2, 0.0, 4e5, 4e5], rtol=1e-12)
+    assert u == pytest.approx(fast.pb.u_c + fast.pb.u_s * mem.U[0], rel=1e-14)
+    assert mem.r_prev == 0.25 and mem.t == 0.0
+    mem2, _ = fast.update(mem, 0.25, y)
+    assert mem2 is mem and mem.t == pytest.approx(0.01)
+    with pytest.raises(InputError, match="p_b"):
+        fast.update(mem, 0.25, {"x": 0.2, "v": 0.0, "p_a": 4e5})
+
+
+def test_compiled_step_refuses_what_it_does_not_run(nmpc):
+    with pytest.raises(InputError, match="ipopt"):
+        CompiledNMPC(nmpc.with_settings(mode="ipopt"))
+    with pytest.raises(InputError, match="preview"):
+        CompiledNMPC(nmpc.with_settings(preview=lambda t: 0.2 + 0 * t))
+    with pytest.raises(InputError, match="DAQP"):
+        CompiledNMPC(nmpc.with_settings(qp_solver="qrqp"))
