@@ -237,7 +237,7 @@ def _downward_text(budget, clean: dict) -> str:
                 f"pressure. Fitted without noise: {clean[b['du_V']]:.2f} % ("
                 + ("a model error; the table's noise adds the rest)."
                    if clean[b["du_V"]] > 2 else
-                   "so the table's noise adds the rest).") if b["du_V"] in clean else ")")
+                   "within 2 %: the table's noise takes it over).") if b["du_V"] in clean else ")")
     return " ".join(parts) or "Approximation I stays within 2 % on every step."
 
 
