@@ -39,7 +39,7 @@ from workbench import Plant, simulate, validate
 from workbench import report as rp
 from workbench.controllers import pd
 from workbench.identify.excitation import prbs
-from workbench.identify.rls import choose_forgetting, rls
+from workbench.identify.rls import a_priori_track, choose_forgetting, rls, simulate_tarx
 from workbench.params import atomic_write_text
 from workbench.robustness import Uncertainty, monte_carlo
 
@@ -118,21 +118,12 @@ def tarx_outputs(res, y, v, burn: int) -> tuple[np.ndarray, np.ndarray]:
     return pred, sim
 
 
-def loop_outputs(theta_at, start: int, y, d, velocity: bool) -> np.ndarray:
-    """Position (m) of a TARX simulated in the experiment's loop from the PRBS alone.
-
-    v(k) = -KP_HOLD y(k) + d(k) as in :class:`DitheredHold` (deviation variables); the
-    model gives y(k) (``velocity=False``) or y(k) - y(k-1) (``velocity=True``, position
-    summed), with the parameters ``theta_at(k)`` of sample k; samples before ``start``
-    are the recording's (the initial state)."""
-    ys = y.copy()
-    s = np.diff(y, prepend=y[0]) if velocity else y.copy()
-    vs = -KP_HOLD * y + d
-    for k in range(start, len(y)):
-        a1, a2, b1, b2 = theta_at(k)
-        s[k] = -a1 * s[k - 1] - a2 * s[k - 2] + b1 * vs[k - 1] + b2 * vs[k - 2]
-        ys[k] = ys[k - 1] + s[k] if velocity else s[k]
-        vs[k] = -KP_HOLD * ys[k] + d[k]
+def loop_outputs(theta, start: int, y, d, velocity: bool) -> np.ndarray:
+    """Position (m) of a TARX simulated in the experiment's loop from the PRBS alone:
+    v(k) = -KP_HOLD y(k) + d(k) as in :class:`DitheredHold` (deviation variables), the
+    model giving y(k) or (``velocity``) y(k) - y(k-1); ``theta`` held or per sample."""
+    ys, _ = simulate_tarx(theta, ORDERS, y, -KP_HOLD * y + d, start, integrate=velocity,
+                          feedback=lambda k, yk: -KP_HOLD * yk + d[k])
     return ys
 
 
@@ -146,16 +137,12 @@ def velocity_tarx(y, v, d, lam: float, burn: int) -> dict:
     estimate held), simulated open loop from the recorded command, and of the velocity."""
     dy = np.diff(y, prepend=y[0])
     r = rls(dy, v, ORDERS, lam, sample_time=SAMPLE_TIME, p0="auto")
-    k0 = r.start_index
-    th = np.vstack([r.theta[:1], r.theta[:-1]])
-    start = k0 + burn
-    loop = loop_outputs(lambda k: th[k - k0], start, y, d, velocity=True)
-    fixed = loop_outputs(lambda k: r.theta[-1], start, y, d, velocity=True)
-    opn, so = y.copy(), dy.copy()
-    for k in range(start, len(y)):
-        a1, a2, b1, b2 = th[k - k0]
-        so[k] = -a1 * so[k - 1] - a2 * so[k - 2] + b1 * v[k - 1] + b2 * v[k - 2]
-        opn[k] = opn[k - 1] + so[k]
+    track = a_priori_track(r, len(y))
+    start = r.start_index + burn
+    loop = loop_outputs(track, start, y, d, velocity=True)
+    fixed = loop_outputs(r.theta[-1], start, y, d, velocity=True)
+    opn, _ = simulate_tarx(track, ORDERS, y, v, start, integrate=True)
+    so = np.diff(opn, prepend=opn[0])
     return {"lambda": lam, "fit_loop_percent": fit_percent(y, loop, start),
             "fit_loop_final_percent": fit_percent(y, fixed, start),
             "fit_open_percent": fit_percent(y, opn, start),
@@ -213,10 +200,8 @@ def judge(res, y, v, burn: int, d=None) -> dict:
     start = res.start_index + burn
     tail = res.theta[len(res.theta) // 2:]
     ahead = horizon_outputs(res, y, v, HORIZON)
-    k0 = res.start_index
-    th = np.vstack([res.theta[:1], res.theta[:-1]])
     loop = (None if d is None else
-            loop_outputs(lambda k: th[k - k0], start, y, d, velocity=False))
+            loop_outputs(a_priori_track(res, len(y)), start, y, d, velocity=False))
     return {"fit_loop_percent": None if loop is None else fit_percent(y, loop, start),
             "pole_radius": float(np.max(np.abs(np.roots([1.0, *res.theta[-1][:2]])))),
             "loop": loop,"lambda": res.forgetting, "prediction_rms_mm": 1e3 * np.sqrt(res.prediction_mse(burn)),

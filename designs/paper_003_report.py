@@ -235,8 +235,9 @@ def _downward_text(budget, clean: dict) -> str:
                 "sqrt(1 - ((p_atm/p - b)/(1 - b))^2), with an infinite slope as p -> p_atm, "
                 "which no polynomial in p follows) acting on a small flow, divided by a small "
                 f"pressure. Fitted without noise: {clean[b['du_V']]:.2f} % ("
-                + ("a model error)." if clean[b["du_V"]] > 2 else
-                   "so the table's noise adds the rest).") if b["du_V"] in clean else ")")
+                + ("a model error; the table's noise adds the rest)."
+                   if clean[b["du_V"]] > 2 else
+                   "within 2 %: the table's noise takes it over).") if b["du_V"] in clean else ")")
     return " ".join(parts) or "Approximation I stays within 2 % on every step."
 
 

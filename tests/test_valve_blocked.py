@@ -38,6 +38,9 @@ def test_blocked_port_points_are_the_zero_flow_pressures(case):
         assert abs(float(st.flow(p, u))) < 1e-13
         assert lo + 0.05 * (hi - lo) < p < hi - 0.05 * (hi - lo)
     assert 0.0 in pts[:, 0] and pts[pts[:, 0] == 0.0][0, 1] == pytest.approx(3.5e5, abs=1e-3)
+    for kw, where in (({"noise": -1.0}, "noise"), ({"margin": 0.5}, "margin")):
+        with pytest.raises(InputError, match=where):
+            st.blocked_port([0.0], **kw)
 
 
 def test_constrained_polynomial_is_the_kkt_solution(case):
@@ -133,7 +136,25 @@ def test_cli_pressure_gain_file(tmp_path, case, capsys):
     import json
     got = json.loads(capsys.readouterr().out)
     assert got["approximation_I"]["pressure_gain_points"] == pts.tolist()
+    (tmp_path / "pe.csv").write_text("u,p_e\n" + "".join(f"{u!r},{p!r}\n" for u, p in pts.tolist()))
+    assert main(["identify", "valve", str(tmp_path / "t.csv"), "--approx", "I", "--degrees",
+                 "5", "8", "--no-tank", "--json", "--pressure-gain",
+                 str(tmp_path / "pe.csv")]) == 0
+    assert json.loads(capsys.readouterr().out)["approximation_I"]["pressure_gain_points"] \
+        == pts.tolist()
     (tmp_path / "bad.csv").write_text("command,pressure\n0,3e5\n")
     assert main(["identify", "valve", str(tmp_path / "t.csv"), "--no-tank",
                  "--pressure-gain", str(tmp_path / "bad.csv")]) == 2
     assert "--pressure-gain" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, message", [
+    ("u,p\n0,abc\n", "data line 2"),
+    ("u,p\n", "no pressure gain points"),
+    ("# only a comment\n", "header"),
+])
+def test_bad_pressure_gain_files(tmp_path, text, message):
+    (tmp_path / "pg.csv").write_text(text)
+    with pytest.raises(InputError, match=message) as exc:
+        vf.load_pressure_gain(tmp_path / "pg.csv")
+    assert "--pressure-gain" in str(exc.value)

@@ -68,7 +68,8 @@ compiled path.
 
 Modules: :mod:`.estimator` (:func:`rls`, :class:`RlsResult`), :mod:`.kernels` (the
 recursion, numpy and CasADi loops), :mod:`.forgetting` (:func:`choose_forgetting`),
-:mod:`.report` (the Markdown report). Command line: :mod:`workbench.cli.identify`.
+:mod:`.report` (the Markdown report), :mod:`.simulate` (the model's simulated output: open
+loop, in the experiment's loop, or integrated from a velocity model). Command line: :mod:`workbench.cli.identify`.
 
 Examples
 --------
@@ -90,6 +91,7 @@ from __future__ import annotations
 
 from .estimator import RlsResult, parameter_names, regressors, rls
 from .forgetting import DEFAULT_CANDIDATES, ForgettingChoice, choose_forgetting
+from .simulate import a_priori_track, simulate_tarx
 
 __all__ = ["RlsResult", "ForgettingChoice", "rls", "choose_forgetting", "regressors",
-           "parameter_names", "DEFAULT_CANDIDATES"]
+           "parameter_names", "DEFAULT_CANDIDATES", "a_priori_track", "simulate_tarx"]

@@ -68,7 +68,7 @@ def check_pressure_gain_points(points, table: ValveTable, source: str = "<memory
 
 
 def load_pressure_gain(path: str | os.PathLike) -> np.ndarray:
-    """Blocked-port points from a CSV file with a header ``u,p`` (V, Pa absolute).
+    """Blocked-port points from a CSV file with a header ``u,p`` or ``u,p_e`` (V, Pa abs).
 
     Lines starting with ``#`` are comments. Returns an (k, 2) array; the ranges are
     checked against the table by :func:`check_pressure_gain_points` when fitting.
@@ -80,9 +80,10 @@ def load_pressure_gain(path: str | os.PathLike) -> np.ndarray:
         raise InputError(f"cannot read the pressure gain file: {exc}", source=str(path),
                          location="--pressure-gain") from exc
     lines = [ln for ln in lines if ln and not ln.startswith("#")]
-    if not lines or [c.strip() for c in lines[0].split(",")] != ["u", "p"]:
+    if not lines or [c.strip() for c in lines[0].split(",")] not in (["u", "p"], ["u", "p_e"]):
         raise InputError("expected a header line 'u,p' (command in V, blocked-port pressure "
-                         "in Pa absolute)", source=str(path), location="--pressure-gain")
+                         "in Pa absolute; 'u,p_e' is read the same)", source=str(path),
+                         location="--pressure-gain")
     rows = []
     for i, ln in enumerate(lines[1:], start=2):
         cells = ln.split(",")
