@@ -96,9 +96,9 @@ def estimate_dead_volume(rig: Plant, spring, fig6_fit) -> dict:
 
 
 def fig6_dead_volume_fit(record, setup: dict):
-    """Grey-box fit of the valve size and one dead volume (both chambers alike in the
-    record's symmetric geometry is not enforced: chamber a, the small one at the step's
-    start, is the one Fig. 6 could see) to the Fig. 6 record."""
+    """Grey-box fit of the valve size and chamber a's dead volume (m^3) to the Fig. 6
+    record: a, the small chamber at the step's start (x = 20 mm), is the one whose dead
+    volume the step could show at all. Returns ``fit(plant) -> GreyBoxResult``."""
     def fit(plant: Plant):
         return estimate(plant, [record], ["valve.sonic_conductance", "cylinder.dead_volume_a"],
                         signals=("x", "v"), x0="from_recording",

@@ -1,7 +1,8 @@
 """designs/paper_000.py --quick: the paper's numbers beside the workbench's (issue 13).
 
-The script runs once per module (about 12 s). Paper values below are typed in from
-the paper (Table I, Table II, Sec. III) independently of the script's constants.
+The script runs once per module (about 10 s of CPU; 30-40 s wall on a loaded machine).
+Paper values below are typed in from the paper (Table I, Table II, Sec. III)
+independently of the script's constants.
 """
 
 from __future__ import annotations
