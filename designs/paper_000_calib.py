@@ -20,7 +20,8 @@ import numpy as np
 
 from workbench import Plant
 from workbench.identify.grey_box import estimate
-from paper_000_model import PAPER, FIG6_V_STD, table1_distance, dominant
+from paper_000_model import (PAPER, FIG6_V_STD, table1_distance, dominant, arx_rows,
+    pole_rows)
 
 #: Static over Coulomb friction and Stribeck velocity (m/s) of the friction family:
 #: ASSUMED (the paper gives no friction but k_f); the static peak a bit above Coulomb
@@ -30,7 +31,7 @@ STRIBECK = 0.01
 
 #: Coulomb friction grid (N): up to about half the force the P loop's valve can give
 #: at mid stroke (0.5 * 5e5 Pa * A = 44 N).
-FC_FULL = (0.0, 10.0, 20.0, 30.0)
+FC_FULL = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
 
 #: Table II: M (kg), k_f (N s/m); zeta printed with one decimal (rounding +- 0.05).
 ZETA_HALF_DIGIT = 0.05
@@ -96,9 +97,9 @@ def estimate_dead_volume(rig: Plant, spring, fig6_fit) -> dict:
 
 
 def fig6_dead_volume_fit(record, setup: dict):
-    """Grey-box fit of the valve size and one dead volume (both chambers alike in the
-    record's symmetric geometry is not enforced: chamber a, the small one at the step's
-    start, is the one Fig. 6 could see) to the Fig. 6 record."""
+    """Grey-box fit of the valve size and chamber a's dead volume (m^3) to the Fig. 6
+    record: a, the small chamber at the step's start (x = 20 mm), is the one whose dead
+    volume the step could show at all. Returns ``fit(plant) -> GreyBoxResult``."""
     def fit(plant: Plant):
         return estimate(plant, [record], ["valve.sonic_conductance", "cylinder.dead_volume_a"],
                         signals=("x", "v"), x0="from_recording",
@@ -175,6 +176,8 @@ def friction_family(rig0: Plant, setup: dict, quick: bool, v_target: float, tool
                      "pole": dominant(ex["model"].poles),
                      "distance": table1_distance(ex["model"]), "sse": float(np.mean(sse)),
                      "fig6": tools["fig6_distance"](db["plant"]),
+                     "table1_rows_agree": sum(r_["agrees"] for r_ in arx_rows(ex["model"])
+                                              + pole_rows(ex["model"])[:2]),
                      "plant": db["plant"], "db": db})
         r = rows[-1]
         r["score"] = float(np.hypot(r["distance"], r["fig6"]))

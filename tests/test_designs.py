@@ -498,7 +498,8 @@ def test_rodless_sim_remaining_keys(rodless_sim):
     fit and band, the pressure range from the CSV, the wall time."""
     _, out, s = rodless_sim
     d = pd.read_csv(out / "trajectory.csv", comment="#")
-    assert s["plant"] == "designs/plants/situm_rodless_nominal.toml" and s["operating_point"]["x"] == 0.25
+    assert s["plant"] == "designs/plants/situm_rodless_nominal.toml"
+    assert s["operating_point"]["x"] == 0.25
     lin = s["exact_linearisation"]
     assert 0.0 <= lin["fit_error"] < 1e-9          # an exact reduction (symmetric, mid stroke)
     lo, hi = lin["band_rad_s"]

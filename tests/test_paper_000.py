@@ -1,7 +1,8 @@
 """designs/paper_000.py --quick: the paper's numbers beside the workbench's (issue 13).
 
-The script runs once per module (about 12 s). Paper values below are typed in from
-the paper (Table I, Table II, Sec. III) independently of the script's constants.
+The script runs once per module (about 10 s of CPU; 30-40 s wall on a loaded machine).
+Paper values below are typed in from the paper (Table I, Table II, Sec. III)
+independently of the script's constants.
 """
 
 from __future__ import annotations
@@ -92,16 +93,27 @@ def test_experiment_csv_columns_and_sampling(run):
 
 def test_arx_reidentified_from_the_csv_independently(run):
     """ARX [4 1 1] = (4, 1, 2) by numpy least squares on the CSV's first half must equal
-    the script's coefficients (same data, same estimator form: differences ~1e-10 from
-    the CSV's 7 written digits of x, relative 1e-5 allowed)."""
+    the script's coefficients (same data, same estimator form). The CSV writes x with 7
+    decimals (rounding +-5e-8 m); a closed position loop's ARX has poles near 1, so its
+    least squares is ill-conditioned and that rounding moves the coefficients by ~1e-4.
+    The tolerance is measured here: 4 x the largest change over 8 re-roundings of the
+    CSV's x by the same uniform +-5e-8 m (the script's unrounded x is one such draw)."""
     out, s = run
     _, _, d = _read_csv(out / "table1_experiment.csv")
     r, x = d[:400, 1], d[:400, 3]
     k = np.arange(4, 400)
-    phi = np.column_stack([-x[k - 1], -x[k - 2], -x[k - 3], -x[k - 4], r[k - 2]])
-    theta = np.linalg.lstsq(phi, x[k], rcond=None)[0]
-    assert np.allclose(theta[:4], s["arx"]["a"], rtol=1e-4, atol=1e-5)
-    assert theta[4] == pytest.approx(s["arx"]["b"][0], rel=1e-3)
+
+    def fit(xx):
+        phi = np.column_stack([-xx[k - 1], -xx[k - 2], -xx[k - 3], -xx[k - 4], r[k - 2]])
+        return np.linalg.lstsq(phi, xx[k], rcond=None)[0]
+
+    theta = fit(x)
+    rng = np.random.default_rng(0)
+    spread = np.max([np.abs(fit(x + rng.uniform(-5e-8, 5e-8, x.size)) - theta)
+                     for _ in range(8)], axis=0)
+    assert np.all(np.abs(theta[:4] - s["arx"]["a"]) <= 4 * spread[:4] + 1e-9)
+    assert abs(theta[4] - s["arx"]["b"][0]) <= 4 * spread[4] + 1e-9
+    assert np.max(spread[:4]) < 2e-3                  # the check is still a sharp one
     poles = np.roots(np.r_[1.0, theta[:4]])
     ours = np.array([complex(*p) for p in s["arx"]["poles"]])
     assert np.allclose(np.sort_complex(poles), np.sort_complex(ours), atol=1e-3)

@@ -33,8 +33,8 @@ def register(subparsers) -> None:
                                                  "controller on drawn plants",
                               description=DESCRIPTION,
                               epilog="Units are SI (m, Pa absolute, kg, s, V). Example: workbench "
-                                     "robustness designs/plants/situm_rodless_nominal.toml --draws 20 "
-                                     "--ranges paper002 --out mc/")
+                                     "robustness designs/plants/situm_rodless_nominal.toml "
+                                     "--draws 20 --ranges paper002 --out mc/")
     p.add_argument("plant", metavar="PLANT.toml", help="plant file with a [controller]")
     p.add_argument("--draws", type=positive_int, default=20, metavar="N",
                    help="drawn plants (default 20)")
