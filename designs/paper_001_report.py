@@ -166,12 +166,20 @@ def metric(v, item: str) -> float:
     return float(next((val for it, val, *_ in v.table() if it == item), "nan"))
 
 
+def _num(v) -> str:
+    """A validation value with three decimals (one format for the mixed-unit column)."""
+    try:
+        return f"{float(v):.3f}"
+    except (TypeError, ValueError):
+        return str(v)
+
+
 def pid_section(ex: dict, compare: dict) -> rp.Section:
     pid, info, vals, tries = ex["pid"], ex["info"], ex["vals"], ex["tries"]
     rows = []
     for (item, val1, lim, unit, ok1), (_, val10, _, _, ok10) in zip(vals[1.0].table(),
                                                                      vals[10.0].table()):
-        rows.append([item, lim, unit, val1, ok1 == "pass", val10, ok10 == "pass"])
+        rows.append([item, lim, unit, _num(val1), ok1 == "pass", _num(val10), ok10 == "pass"])
     items = ("overshoot", "settling time", "steady-state error")
     crow = [[name] + [f"{metric(v, it):.2f}" for it in items]
             + [v.passed, ", ".join(c.name for c in v.failed) or "-"] for name, v in compare.items()]
@@ -215,6 +223,19 @@ def _s(v: float) -> str:
     return f"{v:.3f}" if np.isfinite(v) else "not settled"
 
 
+def _assumption_block(fit: dict):
+    """The bore fit with one assumed value changed (full mode), or a line saying so."""
+    cases = fit.get("assumptions") or []
+    if not cases:
+        return rp.Paragraph("The fit's dependence on the assumed drive values (cylinder bore, "
+                            "moving mass, supply, viscous friction) is measured in full mode.")
+    rows = [["as in the plant file", f"{_mm(fit['d'])} [{_mm(fit['lo'])}, {_mm(fit['hi'])}]"]]
+    rows += [[c["case"], f"{_mm(c['d'])} [{_mm(c['lo'])}, {_mm(c['hi'])}]"] for c in cases]
+    return rp.Table(["assumed value changed", "bore for 0.4 s [0.35, 0.45 s]"], rows,
+                    units=["", "mm"], caption="The tube-bore estimate with one assumed drive "
+                    "value changed ('-': outside the grid of 1.2 .. 3.5 mm)")
+
+
 def transient_section(td: dict, fit: dict, sizes: list, d: float) -> rp.Section:
     rows = [[i + 1] + [_s(v) for v in (a, b, b - a, c, e, e - c)] for i, (a, b, c, e)
             in enumerate(zip(td["settle_1m"], td["settle_10m"], td["half_1m"], td["half_10m"]))]
@@ -235,7 +256,9 @@ def transient_section(td: dict, fit: dict, sizes: list, d: float) -> rp.Section:
             "and run on both. The bore at which the 10 m drive settles 0.4 s later is "
             "interpolated on the grid; the interval is the bores for 0.35 .. 0.45 s (the "
             f"paper's one significant digit): {_mm(fit['d'])} mm [{_mm(fit['lo'])}, "
-            f"{_mm(fit['hi'])}]."),
+            f"{_mm(fit['hi'])}]. Read as the 2 % settling time the same 0.4 s asks for "
+            f"{_mm(fit.get('d_dt2'))} mm, read as a shift of the half-way time "
+            f"{_mm(fit.get('d_shift'))} mm ('-': not reached on the grid)."),
         rp.Table(["tube bore", "transition time 10 m - 1 m", "2 % settling 10 m - 1 m",
                   "half-way shift", "pressure delay 10 m - 1 m", "peak flow ratio",
                   "eq. (4) factor", "kp", "PID validated on both"], grid,
@@ -243,6 +266,7 @@ def transient_section(td: dict, fit: dict, sizes: list, d: float) -> rp.Section:
                  caption="The paper's experiment on a grid of tube bores"),
         rp.Figure(fig_fit(fit), "10 m minus 1 m against the tube bore: the paper's 0.4 s "
                   "(band) fixes the bore"),
+        _assumption_block(fit),
         rp.Table(["step", "settling 1 m", "settling 10 m", "difference", "half-way 1 m",
                   "half-way 10 m", "shift"], rows, units=["", "s", "s", "s", "s", "s", "s"],
                  caption=f"Each setpoint step at the fitted bore ({d * 1e3:.2f} mm), +-"
@@ -354,6 +378,12 @@ def disagreement_section(res, steps, td, fit, sizes) -> rp.Section:
                  + "; ".join(f"{s['step'] * 1e3:g} mm: {_mm(s['fit_d'])} mm "
                              f"[{_mm(s['fit_lo'])}, {_mm(s['fit_hi'])}]" for s in fits)
                  + ". " + _fit_span(fits))
+    cases = fit.get("assumptions") or []
+    if cases:
+        text += (" The drive's assumed values move it as much: "
+                 + "; ".join(f"{c['case']}: {_mm(c['d'])} mm" for c in cases)
+                 + f" ('-': outside 1.2 .. 3.5 mm). The estimate, {_mm(fit['d'])} mm, is the "
+                 "tube for the assumed drive, not a measurement of the paper's tube.")
     blocks.append(rp.Paragraph(text))
     if any(r.startswith("pressure delay") for r in bad):
         blocks.append(rp.Paragraph(
