@@ -253,7 +253,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         for kp, kd in (PD_CANDIDATES[:1] if quick else PD_CANDIDATES):
             pd = PID(kp=kp, kd=kd, sample_time=T, u_center=u_c, u_min=u_lo, u_max=u_hi)
             v = validate.validate(full, pd, spec=spec, reference=ref_val, label="PD, full plant",
-                                  progress=False)
+                                  progress=None)
             tries.append((pd, v))
             print(f"    PD kp = {kp:g}, kd = {kd:g}: {'pass' if v.passed else 'fail'}")
             if v.passed:
@@ -281,11 +281,11 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
 
     with rp.step("validation"):
         v_fl_full = validate.validate(full, fl, spec=spec, reference=ref_val,
-                                      label="FL, full plant", progress=False)
+                                      label="FL, full plant", progress=None)
         v_fl_nom = validate.validate(rig, fl, spec=spec, reference=ref_val,
-                                     label="FL, nominal rig", progress=False)
+                                     label="FL, nominal rig", progress=None)
         v_pd_nom = validate.validate(rig, pd, spec=spec, reference=ref_val,
-                                     label="PD, nominal rig", progress=False)
+                                     label="PD, nominal rig", progress=None)
         runs = {"FL nominal": v_fl_nom, "PD nominal": v_pd_nom,
                 "FL full": v_fl_full, "PD full": v_pd_full}
         for name, v in runs.items():

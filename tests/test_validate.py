@@ -451,3 +451,18 @@ def test_precision_spec_values_and_quantum(situm):
     v = V.evaluate(synthetic(t, ref(t) + 5e-3), ref, V.Specification(), situm)
     assert v.check("sine tracking error").passed
     assert v.check("sine tracking error").value == pytest.approx(5e-3, abs=1e-12)
+
+
+def test_long_validation_prints_progress_lines_off_a_terminal(situm, monkeypatch, capsys):
+    # issue 15: a design script run into a log was silent for a minute. With automatic
+    # progress (None) and stderr not a terminal (pytest captures it), a line every
+    # PROGRESS_EVERY s; set to 0 here so that every sample of a 0.3 s run prints one
+    ref = simulate.profile([(0.0, 0.20), (0.1, 0.20), (0.1, 0.21), (0.3, 0.21)])
+    ctrl = controllers.from_plant(situm)
+    monkeypatch.setattr(V, "PROGRESS_EVERY", 0.0)
+    V.validate(situm, ctrl, reference=ref, progress=None, label="P")
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("  validate P:")]
+    n = round(0.3 / ctrl.sample_time)
+    assert len(lines) >= n - 1 and lines[-1].endswith(f"{n * ctrl.sample_time:.1f} of 0.3 s simulated")
+    V.validate(situm, ctrl, reference=ref, progress=False, label="P")
+    assert "validate P" not in capsys.readouterr().err       # asked for none: none

@@ -26,6 +26,7 @@ Examples
 from __future__ import annotations
 
 import math
+import sys
 import time as _time
 from dataclasses import dataclass, fields, replace
 from typing import Any, Callable, Sequence
@@ -412,21 +413,46 @@ def _overshoot_limit(spec: Specification, m: SegmentMetrics) -> float:
 
 
 # ---------------------------------------------------------------------- validate
-class _Counting:
-    """Controller proxy counting the samples the simulator asked for."""
+#: s of wall time between two progress lines of a long validation (stderr).
+PROGRESS_EVERY = 2.0
 
-    def __init__(self, inner) -> None:
+
+class _Counting:
+    """Controller proxy counting the samples the simulator asked for.
+
+    With a ``label`` it also prints a progress line to stderr every
+    ``PROGRESS_EVERY`` seconds of wall time (simulated time of the total), so a long
+    validation run from a script or a log is never silent.
+    """
+
+    def __init__(self, inner, label: str | None = None, duration: float = math.nan) -> None:
         self.inner = inner
         self.sample_time = inner.sample_time
         self.calls = 0
+        self.label = label
+        self.duration = duration
+        self._last = _time.perf_counter()
 
     def reset(self):
         self.calls = 0
+        self._last = _time.perf_counter()
         return self.inner.reset()
 
     def update(self, state, r, y):
         self.calls += 1
+        if self.label is not None and _time.perf_counter() - self._last >= PROGRESS_EVERY:
+            self._last = _time.perf_counter()
+            print(f"  validate {self.label}: {self.calls * self.sample_time:.1f} of "
+                  f"{self.duration:.1f} s simulated", file=sys.stderr, flush=True)
         return self.inner.update(state, r, y)
+
+
+def _progress_lines(progress: bool | None) -> bool:
+    """Lines on stderr for automatic progress (None) off a terminal (no bar there)."""
+    try:
+        return progress is None and not sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def _truncate(traj: Trajectory, n: int) -> Trajectory:
@@ -468,7 +494,8 @@ def validate(plant, controller=None, spec: Specification | None = None,
     x0 : float (m) or full state, optional
         Default: at rest at r(0).
     progress : bool, optional
-        Progress bar (None: automatic).
+        Progress bar (True), none (False), or automatic (None): a bar on a terminal,
+        else a line on stderr every ``PROGRESS_EVERY`` (2) s of a long run.
     output_step : float, s, optional
         Sampling of the reported trajectory (default 1 ms, finer than the 10 ms
         control period so overshoot peaks are not missed), rounded so that a whole
@@ -517,20 +544,22 @@ def validate(plant, controller=None, spec: Specification | None = None,
                                     output_times=out_t, progress=progress)
 
     t0 = _time.perf_counter()
-    traj, error = _run_keeping_failures(run, duration, controller, T)
+    lines = label if _progress_lines(progress) else None
+    traj, error = _run_keeping_failures(run, duration, controller, T, lines)
     wall = _time.perf_counter() - t0
     traj, error = _finite_part(traj, duration, error)
     return evaluate(traj, reference, spec, plant, error=error, wall_time=wall, label=label)
 
 
-def _run_keeping_failures(run: Callable, duration: float, controller,
-                          T: float) -> tuple[Trajectory, str | None]:
+def _run_keeping_failures(run: Callable, duration: float, controller, T: float,
+                          label: str | None = None) -> tuple[Trajectory, str | None]:
     """Simulate to ``duration`` (s); if the solver gives up, the part up to the failure.
 
+    ``label``: print progress lines under this name (:class:`_Counting`).
     Returns the trajectory and the solver's message (None when it ran through).
     """
     error = None
-    proxy = _Counting(controller)
+    proxy = _Counting(controller, label, duration)
     try:
         traj = run(duration, proxy)
     except InputError:

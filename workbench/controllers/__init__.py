@@ -1,7 +1,7 @@
 """Controllers that run in the sampled-data simulation (not python-control's ``control``)."""
 
 from .base import DiscreteController
-from .compensation import Compensated, DeadbandInverse, friction_force
+from .compensation import Compensated, DeadbandInverse, FrictionModel, friction_force
 from .feedback_linearizing import (SAMPLING_LIMIT, FeedbackLinearizing, Feasibility,
                                    ReferenceModel, error_gains, feasibility,
                                    feedback_linearizing)
@@ -23,4 +23,4 @@ __all__ = ["DiscreteController", "PID", "from_plant", "pd_zero_on_slow_pole",
            "FeedbackLinearizing", "Feasibility", "ReferenceModel", "feedback_linearizing",
            "feasibility", "error_gains", "SAMPLING_LIMIT", "NMPC", "Recorder", "prediction_model",
            "design", "axis_limits", "AxisLimits", "KalmanObserver", "kalman_observer", "Observed",
-           "RigSensors", "Compensated", "DeadbandInverse", "friction_force"]
+           "RigSensors", "Compensated", "DeadbandInverse", "FrictionModel", "friction_force"]

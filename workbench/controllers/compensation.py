@@ -45,7 +45,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["DeadbandInverse", "friction_force", "Compensated", "hold_limit_cycle"]
+__all__ = ["DeadbandInverse", "friction_force", "FrictionModel", "Compensated",
+           "hold_limit_cycle"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +119,48 @@ def friction_force(v, coulomb: float, static: float, stribeck_velocity: float):
     ve = 0.1 * stribeck_velocity
     sgn = np.tanh(v / ve)
     return coulomb * sgn + (static - coulomb) * np.exp(-(v / stribeck_velocity) ** 2) * sgn
+
+
+@dataclass(frozen=True)
+class FrictionModel:
+    """The plant file's dry friction as a smooth law of velocity (:func:`friction_force`).
+
+    Attributes
+    ----------
+    coulomb, static : N. stribeck_velocity : m/s.
+    """
+
+    coulomb: float
+    static: float
+    stribeck_velocity: float
+
+    def __post_init__(self) -> None:
+        for name in ("coulomb", "static", "stribeck_velocity"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise InputError(f"friction {name} must be a number >= 0, got {v!r}")
+        if self.stribeck_velocity <= 0:
+            raise InputError("friction stribeck_velocity must be > 0 m/s")
+
+    @classmethod
+    def from_plant(cls, plant) -> "FrictionModel | None":
+        """From ``friction.coulomb``, ``friction.static`` (default Coulomb) and
+        ``friction.stribeck_velocity`` (default 10 mm/s); None without dry friction."""
+        prm = plant.params
+        if "dry_friction" not in set(plant.effects):
+            return None
+        fc = float(prm.get("friction.coulomb") or 0.0)
+        fs = float(prm.get("friction.static") or fc)
+        vs = float(prm.get("friction.stribeck_velocity") or 0.01)
+        return cls(fc, max(fs, fc), vs)
+
+    def __call__(self, v):
+        """Friction force, N, along -x for v > 0 (m/s)."""
+        return friction_force(v, self.coulomb, self.static, self.stribeck_velocity)
+
+    def to_dict(self) -> dict[str, float]:
+        return {"coulomb": self.coulomb, "static": self.static,
+                "stribeck_velocity": self.stribeck_velocity}
 
 
 @dataclass(frozen=True)

@@ -163,7 +163,7 @@ class DesignEvaluation:
 
 def evaluate_design(plant, kind: str, *, reference=None, spec=None, position_bits: int = 12,
                     pressure_noise: float = 300.0, jit: bool = True, seed: int = 0,
-                    rig=None, progress: bool | None = False) -> DesignEvaluation:
+                    rig=None, progress: bool | None = None) -> DesignEvaluation:
     """Design ``kind`` for ``plant`` and validate it on ``rig`` (default the plant itself).
 
     Parameters
@@ -181,6 +181,9 @@ def evaluate_design(plant, kind: str, *, reference=None, spec=None, position_bit
         Std of each pressure sensor's white noise.
     rig : workbench.Plant, optional
         The plant the controller runs on (e.g. perturbed); default ``plant``.
+    progress : bool, optional
+        As :func:`workbench.validate.validate` (default: lines on stderr every 2 s
+        when stderr is not a terminal).
     """
     from .. import validate
     ref = validate.precision_profile(plant) if reference is None else reference

@@ -388,6 +388,23 @@ class FeedbackLinearizing:
         :class:`~workbench.references.Trajectory`, time from the first sample), or
         None. With it the law tracks r and its first three derivatives directly
         (feedforward) instead of the lagging reference model.
+    friction : the plant file's friction law v (m/s) -> N along -x
+        (:class:`~workbench.controllers.compensation.FrictionModel`), or None.
+        Used with an outside force estimate ``d`` (:class:`~.observer.Observed`).
+        At a start or reversal of the reference the friction changes by up to
+        F_s + F_c within milliseconds, while the law builds force only at its error
+        bandwidth (its jerk law asks lambda^3 e of force rate per metre of error):
+        the piston stuck for 150-200 ms at each reversal of the precision rig's
+        sine. The law therefore adds (1) the model friction's rate at the
+        reference, F'(v_r) a_r / m, to the reference jerk (the force rate the known
+        friction change needs), and (2) to the force estimate the part of the model
+        friction at the *reference's* velocity that the feedback has not yet taken
+        over, F(v_r) - F_lag, F_lag being F(v_r) through a first-order lag of
+        ``friction_lag`` s. Taken at the reference's velocity, not the estimated
+        one, it adds no sensor noise at a hold (v_r = 0: nothing).
+    friction_lag : s, time in which the feedback takes the friction over from the
+        feedforward (:func:`~workbench.controllers.design.design`: 1 / bandwidth,
+        the error poles' time constant); 0: the feedforward is the rate term only.
     """
 
     model: DriveModel
@@ -400,6 +417,8 @@ class FeedbackLinearizing:
     reference: ReferenceModel | None = None
     design: Feasibility | None = None
     preview: Any = None
+    friction: Any = None
+    friction_lag: float = 0.0
     gains: dict = field(init=False)
 
     kind = "feedback linearising"
@@ -415,6 +434,11 @@ class FeedbackLinearizing:
         if not (math.isfinite(lo) and lo >= 0):
             raise InputError(f"observer_bandwidth must be >= 0 rad/s, got {self.observer_bandwidth!r}")
         object.__setattr__(self, "observer_bandwidth", lo)
+        lag = self.friction_lag
+        if isinstance(lag, bool) or not isinstance(lag, (int, float)) or not (math.isfinite(lag) and lag >= 0):
+            raise InputError(f"friction_lag must be >= 0 s, got {lag!r}")
+        if self.friction is not None and not callable(self.friction):
+            raise InputError("friction must be a law v (m/s) -> force (N), e.g. a FrictionModel")
         if self.reference is None:
             object.__setattr__(self, "reference",
                                ReferenceModel(self.bandwidth, self.damping, self.sample_time))
@@ -424,9 +448,38 @@ class FeedbackLinearizing:
 
     def reset(self):
         """Controller state: (reference model state, integral, disturbance estimate,
-        last (v, F), time since the first sample); the reference model starts at the
-        first sample."""
-        return (None, 0.0, 0.0, None, 0.0)
+        last (v, F), time since the first sample, (lagged, fed) model friction or
+        None); the reference model starts at the first sample."""
+        return (None, 0.0, 0.0, None, 0.0, None)
+
+    def _friction_rate(self, tgt) -> float:
+        """Jerk (m/s^3) that the model friction's rate at the reference adds:
+        dF(v_r)/dt / m = F'(v_r) a_r / m (central difference of the smooth law)."""
+        h = 1e-3 * float(getattr(self.friction, "stribeck_velocity", 1e-3))
+        slope = (float(self.friction(tgt[1] + h)) - float(self.friction(tgt[1] - h))) / (2 * h)
+        return slope * float(tgt[2]) / self.model.mass
+
+    def _friction_feedforward(self, f_lag, v_r: float, fr_prev=None) -> tuple[float, float, float]:
+        """(feedforward force N, new lagged friction N, friction fed N) for the
+        reference velocity ``v_r`` (m/s).
+
+        Below the Stribeck velocity the fed friction only grows or changes sign: a
+        reference coming to rest keeps the last direction's friction (a piston
+        still sliding is braked by it until it stops; dropping it to the law's zero
+        at v = 0 stopped the FL short of its target and then stuck it there).
+        """
+        fr = float(self.friction(v_r))
+        vs = float(getattr(self.friction, "stribeck_velocity", 0.0))
+        if (fr_prev is not None and abs(v_r) < vs and abs(fr) <= abs(fr_prev)
+                and fr * fr_prev >= 0):
+            fr = fr_prev
+        f_lag = fr if f_lag is None else f_lag
+        ff = fr - f_lag
+        if self.friction_lag > 0:
+            f_lag += (1.0 - math.exp(-self.sample_time / self.friction_lag)) * (fr - f_lag)
+        else:
+            f_lag = fr
+        return ff, f_lag, fr
 
     def _characteristic(self, xr, jr, z, d, x, v, p_a, p_b) -> tuple[float, float, float]:
         """(G, position error, model acceleration) of the linearising law at one state,
@@ -452,7 +505,9 @@ class FeedbackLinearizing:
         return st, float(self.reference.jerk(st, r))
 
     def update(self, state, r: float, y: dict) -> tuple[tuple, float]:
-        xr, z, d, last, t = state if len(state) == 5 else (*state, 0.0)
+        xr, z, d, last, t, fric = ((*state, 0.0, None)[:6] if len(state) == 4
+                                   else (*state, None)[:6])
+        f_lag, f_fed = (None, None) if fric is None else fric
         m = self.model
         T = self.sample_time
         x, v, p_a, p_b = float(y["x"]), float(y["v"]), float(y["p_a"]), float(y["p_b"])
@@ -467,6 +522,10 @@ class FeedbackLinearizing:
         if xr is None:                      # start the reference model where the piston is
             xr = np.array([x, v, float(m.acceleration(v, p_a, p_b)) - d / m.mass])
         tgt, jr = self._target(xr, r, t, False)
+        if self.friction is not None and "d" in y:
+            ff, f_lag, f_fed = self._friction_feedforward(f_lag, float(tgt[1]), f_fed)
+            d = d + ff
+            jr = jr + self._friction_rate(tgt)
         G, e0, a = self._characteristic(tgt, jr, z, d, x, v, p_a, p_b)
         if self.midpoint:
             # evaluate the law again half a period on, at the state the model predicts
@@ -474,6 +533,8 @@ class FeedbackLinearizing:
             h = 0.5 * T
             dpa, dpb = m.pressure_rates(x, v, p_a, p_b, G0)
             tgt, jr = self._target(xr, r, t, True)
+            if self.friction is not None and "d" in y:
+                jr = jr + self._friction_rate(tgt)
             G, _, _ = self._characteristic(tgt, jr, z + h * e0, d,
                                            x + h * v + 0.5 * h * h * a, v + h * a,
                                            p_a + h * float(dpa), p_b + h * float(dpb))
@@ -481,7 +542,8 @@ class FeedbackLinearizing:
         z_new = z + T * e0
         if sat and np.sign(e0) == np.sign(G):      # conditional integration (anti-windup)
             z_new = z
-        return (self.reference.step(xr, r), z_new, d, (v, F), t + T), float(u)
+        fric = None if f_lag is None else (f_lag, f_fed)
+        return (self.reference.step(xr, r), z_new, d, (v, F), t + T, fric), float(u)
 
     def reference_response(self, reference, t_end: float,
                            x0: float | None = None) -> tuple[np.ndarray, np.ndarray]:
