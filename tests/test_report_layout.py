@@ -419,3 +419,20 @@ def test_a_unit_column_gives_one_format_per_quantity():
     # without a unit column (or with one unit) the whole column shares one format
     one = table_view(["a", "unit"], None, [[0.00038778, "s"], [2.3634e-08, "s"]]).texts
     assert [t[0] for t in one] == ["3.878e-4", "2.363e-8"]
+
+
+def test_a_column_with_its_own_unit_keeps_one_format_in_a_table_of_quantities():
+    # nonlinear_comparison's table: quantity | unit | PD | NMPC | PD / NMPC. The ratio
+    # column is one quantity (dimensionless, "-" in the header's unit row), so it keeps
+    # one format; formatted per row unit it showed 0.432 beside 12.5
+    from workbench.report.columns import table_view
+    rows = [["IAE", "mm s", 31.68, 13.3, 0.432], ["largest |r - x|", "mm", 99.92, 8.0, 12.5],
+            ["air drawn", "g", 1.229, 5.017, 0.245]]
+    head = ["quantity", "unit", "PD", "NMPC", "PD / NMPC"]
+    own = table_view(head, ["", "", "", "", "-"], rows).texts
+    # 4 significant digits of the smallest (0.245): 4 decimals, the zero all share dropped
+    assert [t[4] for t in own] == ["0.432", "12.500", "0.245"]
+    per_row_unit = table_view(head, None, rows).texts
+    assert [t[4] for t in per_row_unit] == ["0.432", "12.5", "0.245"]
+    # the value columns without a header unit still take one format per row unit
+    assert [t[3] for t in own] == [t[3] for t in per_row_unit] == ["13.3", "8", "5.017"]
