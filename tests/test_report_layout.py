@@ -412,7 +412,8 @@ def test_a_unit_column_gives_one_format_per_quantity():
     rows = [["Kv", 0.7, 0.63, "m/s"], ["p_s", 5e5, 6.013e5, "Pa"],
             ["zeta", 1.1, 1.16, "-"], ["b1", 0.0125, 0.003883, "-"]]
     texts = table_view(["result", "paper", "workbench", "unit"], None, rows).texts
-    assert texts[0][1:3] == ("0.7", "0.63") and texts[1][1:3] == ("500000", "601300")
+    # the paper's value and the workbench's in one row share the row's format
+    assert texts[0][1:3] == ("0.70", "0.63") and texts[1][1:3] == ("500000", "601300")
     dimless = [t[2] for t in texts if t[3] == "-"]
     assert len({len(x.split(".")[1]) for x in dimless}) == 1      # one format
     assert all(float(x) == pytest.approx(v, rel=1e-3) for x, v in zip(dimless, (1.16, 0.003883)))
@@ -433,6 +434,7 @@ def test_a_column_with_its_own_unit_keeps_one_format_in_a_table_of_quantities():
     # 4 significant digits of the smallest (0.245): 4 decimals, the zero all share dropped
     assert [t[4] for t in own] == ["0.432", "12.500", "0.245"]
     per_row_unit = table_view(head, None, rows).texts
-    assert [t[4] for t in per_row_unit] == ["0.432", "12.5", "0.245"]
-    # the value columns without a header unit still take one format per row unit
-    assert [t[3] for t in own] == [t[3] for t in per_row_unit] == ["13.3", "8", "5.017"]
+    assert [t[4] for t in per_row_unit] == ["0.432", "12.50", "0.245"]
+    # the value columns share one format per row unit across the row: 4 significant
+    # digits of the row's smallest (13.3 -> 2 decimals, 8.0 -> 3 then the shared 0 dropped)
+    assert [t[2:4] for t in own] == [("31.68", "13.30"), ("99.92", "8.00"), ("1.229", "5.017")]
