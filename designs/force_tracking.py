@@ -365,7 +365,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                 mc_rows.append([cname, pname, f"{sum(res.passed[cname])}/{runs_n}",
                                 f"{rate * 100:.0f} % ({lo * 100:.0f} .. {hi * 100:.0f} %)",
                                 med, worst_s, check or "-",
-                                "pass" if nom.passed else "fail: " + ", ".join(nom.failed)])
+                                "PASS" if nom.passed else "FAIL: " + ", ".join(nom.failed)])
                 print(f"    {cname}, {pname}: pass {rate * 100:.0f} % "
                       f"[{lo * 100:.0f}..{hi * 100:.0f} %], RMS median {med:.3f} N, worst {worst_s:.3f} N")
         print(f"    Monte Carlo: {2 * n_mc * len(mc_ctrls)} runs in {t_mc:.1f} s")

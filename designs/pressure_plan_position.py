@@ -366,7 +366,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
         for name, msg in errors.items():
             blocks.append(rp.Status("FAIL", f"{name}: simulation failed: {msg}"))
         blocks += _findings(mets)
-        for pname in plants:
+        for pname in rp.progress(list(plants), "closed-loop figure"):
             sub = {c: r for (p, c), r in runs.items() if p == pname}
             if sub:
                 blocks.append(_figure(_runs_figure(sub, ref, sv, pname),

@@ -8,10 +8,11 @@ units). The rules, written here independently of ``workbench.report.columns``:
   with the same number of decimals, or scientific notation with the same mantissa
   length. In a table of quantities (a ``unit`` column naming several units) a
   column without a unit of its own may use one format per unit (one per quantity);
-* **every number column says its unit**: in the header's unit row (``[mm]``,
-  ``[-]`` for a ratio), through a per-row ``unit`` column, or in its heading
-  (``settling time (s)``, ``overshoot %``); a column of whole numbers (counts,
-  seeds) needs none;
+* **a table of quantities says each row's unit**: a table whose rows are different
+  quantities (its first heading is ``quantity``, ``parameter``, ``result``, ``item``,
+  ``check``, ``metric``) has a ``unit`` column, unless every number column gives its
+  unit in the header row or its heading (``settling time (s)``); a column of whole
+  numbers (counts, seeds) needs none;
 * **no row of another unit under a column unit**: a row whose label names a unit
   of its own (``phase margin (deg)``) in a table whose number columns give theirs
   in the header mixes two quantities in one column.
@@ -36,6 +37,9 @@ UNIT_WORDS = {"-", "%", "deg", "rad", "s", "ms", "us", "min", "m", "mm", "cm", "
               "kg/s", "1/s", "rad/s", "Hz", "m/s", "mm/s", "m/s^2", "N/mm", "N/m", "N s/m",
               "V/m", "V s/m", "V/s", "l", "l/min", "l/min ANR", "K", "J", "W", "m^3",
               "cm^3", "m/(V s)", "mm s", "N s", "dB"}
+#: First headings of a table that lists one quantity per row.
+QUANTITY_HEADINGS = {"quantity", "quantities", "parameter", "parameters", "result", "item",
+                     "check", "metric", "figure"}
 _BRACKETED = re.compile(r"[\[(]\s*([^\[\]()]+?)\s*[\])]")
 SPECIAL = {"inf", "-inf", "n/a"}
 
@@ -150,6 +154,7 @@ def problems(table: ScannedTable) -> list[str]:
     several_units = uc is not None and len(set(row_units)) > 1
     header_units = table.units or [""] * len(table.header)
     has_header_unit_numbers = False
+    quantities = table.header[0].strip().lower() in QUANTITY_HEADINGS
     for j, head in enumerate(table.header):
         if j == uc:
             continue
@@ -174,9 +179,9 @@ def problems(table: ScannedTable) -> list[str]:
                 out.append(f"{name}, column {head!r}{where}: more than one number format "
                            f"{sorted(found)}")
         whole = all(s[0] in ("int", "zero") for s, _ in nums)
-        if not (own or uc is not None or names_unit(head) or whole):
-            out.append(f"{name}, column {head!r}: numbers without a unit (give it in the "
-                       "header row, '-' for a ratio, or a unit column)")
+        if (quantities and not (own or uc is not None or names_unit(head) or whole)):
+            out.append(f"{name}, column {head!r}: numbers of the quantities in the rows "
+                       "without their units (add a unit column)")
     if has_header_unit_numbers and uc is None:
         for r in table.rows:
             if r and names_unit(r[0]):

@@ -98,6 +98,11 @@ BASE = {
     "valve-table": ["identify", "valve-table", PLANT, "--out", "OUT/table.csv", "--n-u", "5",
                     "--n-p", "4"],
     "diagnose": ["diagnose", PLANT, REC, "--out", "OUT", "--workers", "1", "--quiet"],
+    # a rig's recording: column mapping with units and a time window
+    "simulate-rig": ["simulate", PLANT, REC, "--columns", "x=x:m,u=u", "--window", "0:0.4",
+                     "--out", "OUT", "--no-plot", "--quiet"],
+    "arx-window": ["identify", "arx", "ARX", "--input", "u", "--output", "x", "--orders", "2",
+                   "1", "1", "--window", "0.1:", "--columns", "t=t:s", "--json"],
     "bench": ["bench", "rls", "--quick", "--json"],
 }
 
@@ -107,7 +112,9 @@ TOKENS = ["", " ", "0", "1", "-1", "-3", "2", "0.5", "0.25", "-0.5", "1e-9", "1e
           "inf", "-inf", "1e309", "1000000", "abc", "1:2", "2:1", "k0=1:2:3", "mass=0:1:2",
           "x=1:2:0", "load.mass", "no.such", "u", "x", "r", "p_a", "auto", "mean", "I",
           "open", "é", "-", "--json", "a\x00b", "PLANT", "REC", "ARX", "EMPTY", "BINARY",
-          "FOLDER", "MISSING", "OUT", "OUT/sub"]
+          "FOLDER", "MISSING", "OUT", "OUT/sub",
+          "x=x:mm", "t=t:ms", "u=u:mV", "x=pos:mm", "x:mm", "p_a=x", "x=x:inch", "x=x,x=x",
+          "0:0.02", ":", "0.5:", ":0.1", "5:6", "0.3:0.1", "--window", "--columns"]
 
 
 def _resolve(argv: list[str], files: dict[str, str], out: Path) -> list[str]:

@@ -110,7 +110,8 @@ def plant_variants(draw):
             data[section][key] *= draw(st.floats(0.5, 2.0))
         elif action == "effect":
             for sec, keys in EFFECT_KEYS[draw(st.sampled_from(sorted(EFFECT_KEYS)))].items():
-                data.setdefault(sec, {}).update(keys)
+                if isinstance(data.setdefault(sec, {}), dict):   # not replaced by a value
+                    data[sec].update(keys)
         elif action == "set":
             data[section][key] = draw(toml_value)
         elif action == "delete":

@@ -107,6 +107,8 @@ RECORDING_CASES = {
         ("time,cmd,pos_mm", (_T, _U, _X * 1e3), "", ["--columns", "t=time,u=cmd,x=pos_mm:mm"]),
     "header `t,u,x,` (trailing delimiters)": ("t,u,x,", (_T, _U, _X), "", [], ","),
     "`--window 0.05:0.15`": ("t,u,x", (_T, _U, _X), "", ["--window", "0.05:0.15"]),
+    "t jumps by 1 s after t = 0.1 s, with `--window :0.1`":
+        ("t,u,x", (np.where(_T > 0.1, _T + 1.0, _T), _U, _X), "", ["--window", ":0.1"]),
     "t in ms, not declared": ("t,u,x", (_T * 1e3, _U, _X), "", []),
     "t jumps by 1 s after t = 0.1 s": ("t,u,x", (np.where(_T > 0.1, _T + 1.0, _T), _U, _X), "", []),
     "`# sample_time: 0.01` over 1 ms steps": ("t,u,x", (_T, _U, _X), "# sample_time: 0.01\n", []),
@@ -123,6 +125,8 @@ RECORDING_CASES = {
                                                           ["--columns", "x=pos_mm:mm"]),
     "`--window 0.15:0.05`": ("t,u,x", (_T, _U, _X), "", ["--window", "0.15:0.05"]),
     "`--window 5:6` (the file spans 0 .. 0.199 s)": ("t,u,x", (_T, _U, _X), "", ["--window", "5:6"]),
+    "x = NaN at t = 0.05 s, with `--window 0.1:`":
+        ("t,u,x", (_T, _U, np.where(np.isclose(_T, 0.05), np.nan, _X)), "", ["--window", "0.1:"]),
 }
 
 
@@ -153,7 +157,9 @@ def test_recording_case_as_the_readme_says(case, result, tmp_path, capsys):
     plant = PlantParams.from_toml(PLANT)
     if result.startswith("accepted"):
         rec = load_from_args(build_parser().parse_args(argv), path, plant=plant)
-        keep = (_T >= 0.05) & (_T <= 0.15) if "--window" in extra else np.ones(_N, bool)
+        window = extra[extra.index("--window") + 1] if "--window" in extra else ":"
+        lo, hi = (float(v) if v else None for v in window.split(":"))
+        keep = (_T >= (lo if lo is not None else -np.inf)) & (_T <= (hi if hi is not None else np.inf))
         assert len(rec) == keep.sum()
         if "samples" in result:                               # "accepted: 101 samples"
             assert len(rec) == int(re.search(r"(\d+) samples", result).group(1))

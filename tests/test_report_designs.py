@@ -68,12 +68,15 @@ def test_scanner_catches_a_mixed_format_column():
     assert problems(ok) == []
 
 
-def test_scanner_catches_a_column_without_a_unit():
+def test_scanner_catches_a_table_of_quantities_without_units():
     # situm_p_pd's linear-model table before: w0, zeta, Kv, T0, p in one column, the
     # units only in the caption
     t = _table(["quantity", "formula", "exact"],
                [["w0", "32.977", "28.068"], ["zeta", "1.083", "1.272"], ["p", "5.000", "3.786"]])
-    assert sum("without a unit" in p for p in problems(t)) == 2
+    assert sum("without their units" in p for p in problems(t)) == 2
+    # a column of one quantity (a dimensionless gain) needs no unit row to be read
+    gain = _table(["model", "DC gain"], [["ARX", "0.9843"], ["PCT", "1.0000"]])
+    assert problems(gain) == []
     fixed = _table(["quantity", "unit", "formula", "exact"],
                    [["w0", "rad/s", "32.977", "28.068"], ["zeta", "-", "1.083", "1.272"],
                     ["p", "bar abs", "5.000", "3.786"]])

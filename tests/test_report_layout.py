@@ -412,10 +412,29 @@ def test_a_unit_column_gives_one_format_per_quantity():
     rows = [["Kv", 0.7, 0.63, "m/s"], ["p_s", 5e5, 6.013e5, "Pa"],
             ["zeta", 1.1, 1.16, "-"], ["b1", 0.0125, 0.003883, "-"]]
     texts = table_view(["result", "paper", "workbench", "unit"], None, rows).texts
-    assert texts[0][1:3] == ("0.7", "0.63") and texts[1][1:3] == ("500000", "601300")
+    # the paper's value and the workbench's in one row share the row's format
+    assert texts[0][1:3] == ("0.70", "0.63") and texts[1][1:3] == ("500000", "601300")
     dimless = [t[2] for t in texts if t[3] == "-"]
     assert len({len(x.split(".")[1]) for x in dimless}) == 1      # one format
     assert all(float(x) == pytest.approx(v, rel=1e-3) for x, v in zip(dimless, (1.16, 0.003883)))
     # without a unit column (or with one unit) the whole column shares one format
     one = table_view(["a", "unit"], None, [[0.00038778, "s"], [2.3634e-08, "s"]]).texts
     assert [t[0] for t in one] == ["3.878e-4", "2.363e-8"]
+
+
+def test_a_column_with_its_own_unit_keeps_one_format_in_a_table_of_quantities():
+    # nonlinear_comparison's table: quantity | unit | PD | NMPC | PD / NMPC. The ratio
+    # column is one quantity (dimensionless, "-" in the header's unit row), so it keeps
+    # one format; formatted per row unit it showed 0.432 beside 12.5
+    from workbench.report.columns import table_view
+    rows = [["IAE", "mm s", 31.68, 13.3, 0.432], ["largest |r - x|", "mm", 99.92, 8.0, 12.5],
+            ["air drawn", "g", 1.229, 5.017, 0.245]]
+    head = ["quantity", "unit", "PD", "NMPC", "PD / NMPC"]
+    own = table_view(head, ["", "", "", "", "-"], rows).texts
+    # 4 significant digits of the smallest (0.245): 4 decimals, the zero all share dropped
+    assert [t[4] for t in own] == ["0.432", "12.500", "0.245"]
+    per_row_unit = table_view(head, None, rows).texts
+    assert [t[4] for t in per_row_unit] == ["0.432", "12.50", "0.245"]
+    # the value columns share one format per row unit across the row: 4 significant
+    # digits of the row's smallest (13.3 -> 2 decimals, 8.0 -> 3 then the shared 0 dropped)
+    assert [t[2:4] for t in own] == [("31.68", "13.30"), ("99.92", "8.00"), ("1.229", "5.017")]

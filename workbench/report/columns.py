@@ -16,8 +16,9 @@ Rules the renderers share (both :mod:`.html` and :mod:`.pdf` use them, through
   with its column, so a design that formatted values itself still gets one
   format per column.
 * **A table of quantities** (a ``unit`` column naming several units, one quantity
-  per row): a number column without a unit of its own gets one format per unit,
-  a column with a unit in the header row (a ratio, ``"-"``) one format for all.
+  per row): the number columns without a unit of their own share one format per
+  unit (a row's paper and workbench values alike, and rows of one unit); a column
+  with a unit in the header row (a ratio, ``"-"``) has one format for all its rows.
 * **One status vocabulary.** ``PASS``/``FAIL`` (and ``NOTE``/``ERROR`` in
   banners); ``"passed"``, ``"PASSED"``, ``"fail"``, ``"FAILED"`` ... are accepted and
   shown as ``PASS``/``FAIL``.
@@ -214,14 +215,16 @@ def _column_kind(cells: list) -> str:
     return "text"
 
 
-def _column_texts(cells: list, digits: int,
-                  groups: Sequence[Any] | None = None) -> tuple[list[str], list[Any]]:
+def _column_texts(cells: list, digits: int, groups: Sequence[Any] | None = None,
+                  shared: dict | None = None) -> tuple[list[str], list[Any]]:
     """Texts and values of one column; ``groups`` (one key per row, e.g. the row's
-    unit) gives one format per group instead of one for the whole column."""
+    unit) gives one format per group instead of one for the whole column, taken
+    from ``shared`` (group -> format) when given."""
     numbers_ = [number_text(c) for c in cells]
     keys = list(groups) if groups is not None else [None] * len(cells)
-    fmts = {k: column_format([n[1] for n, kk in zip(numbers_, keys)
-                              if n is not None and kk == k], digits) for k in set(keys)}
+    fmts = dict(shared) if shared is not None else {
+        k: column_format([n[1] for n, kk in zip(numbers_, keys) if n is not None and kk == k],
+                         digits) for k in set(keys)}
     texts, values = [], []
     for c, n, k in zip(cells, numbers_, keys):
         fmt = fmts[k]
@@ -259,6 +262,18 @@ def _quantity_per_row(columns: Sequence[str], cols: list[list]) -> list[str] | N
     return None
 
 
+def _formats_per_quantity(columns: list[list], groups: Sequence[str], digits: int) -> dict:
+    """One format per quantity (row unit) from the numbers of every given column: the
+    paper's value and the workbench's in one row share a format, as do rows of one unit."""
+    pool: dict[str, list] = {k: [] for k in groups}
+    for cells in columns:
+        for c, k in zip(cells, groups):
+            n = number_text(c)
+            if n is not None:
+                pool[k].append(n[1])
+    return {k: column_format(v, digits) for k, v in pool.items()}
+
+
 def table_view(columns: Sequence[str], units: Sequence[str] | None, rows: Sequence[Sequence],
                digits: int = 4, drop_empty: bool = True) -> TableView:
     """Kinds, one format per column and the dropped empty columns of a table.
@@ -280,12 +295,18 @@ def table_view(columns: Sequence[str], units: Sequence[str] | None, rows: Sequen
     keep = keep or list(range(ncol))
     kinds, texts, values = [], [], []
     groups = _quantity_per_row(columns, cols)
+    # a column whose header gives its own unit (a ratio "-", a count) holds one
+    # quantity in every row: one format for it, whatever the unit column says
+    own = [units is not None and bool(str(units[j]).strip()) for j in range(ncol)]
+    shared = None if groups is None else _formats_per_quantity(
+        [cols[j] for j in keep if not own[j] and _column_kind(cols[j]) == "num"], groups, digits)
     for j in keep:
         kinds.append(_column_kind(cols[j]))
-        # a column whose header gives its own unit (a ratio "-", a count) holds one
-        # quantity in every row: one format for it, whatever the unit column says
-        own_unit = units is not None and bool(str(units[j]).strip())
-        t, v = _column_texts(cols[j], digits, None if own_unit else groups)
+        if own[j] or groups is None:
+            t, v = _column_texts(cols[j], digits)
+        else:
+            t, v = _column_texts(cols[j], digits, groups,
+                                 shared if kinds[-1] == "num" else None)
         texts.append(t)
         values.append(v)
     unit_row = None if units is None else tuple(keep_formulas(units[j]) for j in keep)
