@@ -212,7 +212,8 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
             continue
         mine = sc[_AGAINST[name]]
         rows[name] = baseline(sc[name], mine["median_s"], sc[name]["cost"] / mine["cost"] - 1.0,
-                              _DESCRIPTIONS[name], against=_AGAINST[name],
+                              _DESCRIPTIONS[name], ours_cpu_s=mine["cpu_median_s"],
+                              against=_AGAINST[name],
                               cpu_p99_ms=sc[name]["cpu_p99_ms"], cost=sc[name]["cost"],
                               iae_m_s=sc[name]["iae_m_s"],
                               qp_failures=getattr(ctrls[name], "failures", None),
