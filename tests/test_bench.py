@@ -44,6 +44,9 @@ def test_timing_helpers():
     assert stats["a"]["spread"]["repeats"] == 3
     row = timing.baseline({"median_s": 2.0}, 0.5, 1e-3, "x")
     assert row["ratio"] == 4.0 and row["available"]
+    row = timing.baseline({"median_s": 2.0, "cpu_median_s": 0.3}, 0.5, 1e-3, "x", ours_cpu_s=0.1)
+    assert row["cpu_ratio"] == pytest.approx(3.0) and "cpu_ratio" not in timing.baseline(
+        {"median_s": 2.0}, 0.5, 1e-3, "x")
     assert timing.unavailable("x", "why")["ratio"] is None
 
 

@@ -23,6 +23,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: Plant of the benchmark (issue: the 25 mm reference plant, 4 states).
 BENCH_PLANT = "designs/plants/rig25_mpye.toml"
+#: s: the closed loop of the full run (the validation profile compressed to it)
+FULL_S = 10.0
 
 
 def bench_reference(plant, duration: float = 20.0):
@@ -135,8 +137,9 @@ def _baselines(nmpc_vm) -> tuple[dict, dict]:
     return ctrls, missing
 
 
-def _alone(plant, rti, nmpc, ref, duration: float, plain_from) -> dict:
-    """Our RTI and the plain RTI each run alone over the same closed loop.
+def _alone(plant, mine: dict, nmpc, ref, duration: float, plain_from) -> dict:
+    """Ours (``mine``: name -> controller) and the plain RTI each run alone over the
+    same closed loop.
 
     In lockstep every controller starts its sample with caches cold from the others
     (IPOPT, do-mpc); a controller on its own core does not. Each here runs in a loop of
@@ -145,7 +148,7 @@ def _alone(plant, rti, nmpc, ref, duration: float, plain_from) -> dict:
     """
     out = {"note": "each controller alone in its closed loop (caches warm from its own "
                    "previous sample); the headline median_s is from the lockstep run"}
-    runs = {"rti": lockstep(plant, {"rti": rti}, ref, duration, nmpc)["rti"]}
+    runs = {k: lockstep(plant, {k: c}, ref, duration, nmpc)[k] for k, c in mine.items()}
     if plain_from is not None:
         from .baselines_mpc import PlainRTI
         runs["plain_rti_osqp"] = lockstep(plant, {"p": PlainRTI(plain_from)}, ref, duration,
@@ -154,7 +157,9 @@ def _alone(plant, rti, nmpc, ref, duration: float, plain_from) -> dict:
         sc = _scores(run, nmpc, nmpc.sample_time)
         out[k] = {q: sc[q] for q in ("median_s", "cpu_median_s", "cpu_p99_ms", "cost")}
     if "plain_rti_osqp" in out:
-        out["ratio_plain_rti_osqp"] = out["plain_rti_osqp"]["median_s"] / out["rti"]["median_s"]
+        for k in mine:
+            out[k]["ratio_plain_rti_osqp"] = (out["plain_rti_osqp"]["median_s"]
+                                              / out[k]["median_s"])
     return out
 
 
@@ -172,7 +177,8 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
     """NMPC time per sample, ours against the plain baselines, all in lockstep.
 
     Horizon 20 samples of 10 ms on ``designs/plants/rig25_mpye.toml`` (4 states), the
-    validation profile compressed to 20 s (``quick``: its first 3 s), disturbance
+    validation profile compressed to 10 s (``quick``: its first 3 s; 10 s keeps the
+    full run, with IPOPT and do-mpc on every sample, within minutes), disturbance
     observer off (the baselines have none). Ours runs twice, each sample one compiled C
     call (:mod:`workbench.controllers.mpc.fast`; as ``rti_uncompiled`` also through
     ``NMPC.update``, for comparison): RTI (the headline:
@@ -180,16 +186,20 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
     5 steps per sample, ``converged``). Each baseline's ``ratio`` is its median over
     that of ours in the same class (RTI vs RTI, converged vs converged); ``error`` is
     its closed-loop cost relative to ours - 1. The first sample (a cold start) counts.
+    Also: ``sqp2`` (ours with at most two steps per sample), ``alone`` (ours and the
+    plain RTI each in a loop of its own, see :func:`_alone`) and ``variants`` (the
+    friction, deadband and line models, :mod:`.mpc_variants`).
     """
     from ..controllers.mpc import NMPC
     from ..plant import Plant
     plant = Plant.from_toml(ROOT / BENCH_PLANT)
-    duration = duration or (3.0 if quick else 20.0)
-    ref = bench_reference(plant, 20.0)
+    duration = duration or (3.0 if quick else FULL_S)
+    ref = bench_reference(plant, FULL_S)
     t0 = time.perf_counter()
     nmpc = NMPC.for_plant(plant, horizon=20, sample_time=0.01, disturbance_gain=0.0, jit=jit)
     sqp = nmpc.with_settings(mode="sqp", max_iterations=5)
-    ours, why = _compiled({"rti": nmpc, "sqp": sqp}, jit)
+    sqp2 = nmpc.with_settings(mode="sqp", max_iterations=2)
+    ours, why = _compiled({"rti": nmpc, "sqp": sqp, "sqp2": sqp2}, jit)
     build = time.perf_counter() - t0
     ours["rti_uncompiled"] = nmpc
     ctrls, missing = _baselines(nmpc.with_settings(jit=False))
@@ -202,14 +212,15 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
             continue
         mine = sc[_AGAINST[name]]
         rows[name] = baseline(sc[name], mine["median_s"], sc[name]["cost"] / mine["cost"] - 1.0,
-                              _DESCRIPTIONS[name], against=_AGAINST[name],
+                              _DESCRIPTIONS[name], ours_cpu_s=mine["cpu_median_s"],
+                              against=_AGAINST[name],
                               cpu_p99_ms=sc[name]["cpu_p99_ms"], cost=sc[name]["cost"],
                               iae_m_s=sc[name]["iae_m_s"],
                               qp_failures=getattr(ctrls[name], "failures", None),
                               valid=bool(getattr(ctrls[name], "failures", 0) == 0
                                          and sc[name]["cost"] < 1.1 * mine["cost"]))
     head = sc["rti"]
-    alone = _alone(plant, ours["rti"], nmpc, ref, duration,
+    alone = _alone(plant, {k: ours[k] for k in ("rti", "sqp2")}, nmpc, ref, duration,
                    None if "plain_rti_osqp" in missing else nmpc.with_settings(jit=False))
     from .mpc_variants import variants
     var = variants(plant, ref, min(duration, 5.0), nmpc,
@@ -229,6 +240,10 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
                                "description": "the same NMPC through NMPC.update (Python "
                                               "around the compiled step)"},
             "rti_breakdown": rti_breakdown(nmpc, runs["rti_uncompiled"]),
+            "sqp2": {**sc["sqp2"], "error": sc["sqp2"]["cost"] / sc["sqp"]["cost"] - 1.0,
+                     "description": "ours with at most 2 Gauss-Newton steps per sample "
+                                    "(a second only where the first moved the plan by more "
+                                    "than the tolerance)"},
             "alone": alone, "variants": var,
             "variants_note": "friction, deadband and line versions of the prediction model "
                              "(bench.mpc_variants), each in lockstep with the 4-state model "

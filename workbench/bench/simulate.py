@@ -145,7 +145,8 @@ def _case(plant, duration: float, quick: bool, cvodes_ladder=CVODES_LADDER,
         if cal is None:
             rows[name] = unavailable(desc, "no setting of the ladder ran")
         else:
-            rows[name] = baseline(stats[name], med, cal[2], desc, **{key: cal[0]},
+            rows[name] = baseline(stats[name], med, cal[2], desc,
+                                  ours_cpu_s=stats["ours"]["cpu_median_s"], **{key: cal[0]},
                                   within_bound=bool(cal[2] <= bound))
     if len(plant.states) <= 4:                  # the old baseline, 4-state case only
         t0, c0 = time.perf_counter(), time.thread_time()

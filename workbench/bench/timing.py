@@ -64,13 +64,24 @@ def interleaved(fns: Mapping[str, Callable[[], Any]], repeats: int,
 
 
 def baseline(stats: Mapping[str, Any], ours_median_s: float, error: float | None,
-             description: str, **extra: Any) -> dict[str, Any]:
-    """One row of ``baselines``: its median (s), error, ratio to ours, description."""
+             description: str, ours_cpu_s: float | None = None,
+             **extra: Any) -> dict[str, Any]:
+    """One row of ``baselines``: its median (s), error, ratio to ours, description.
+
+    ``ratio`` is of the wall-time medians; with ``ours_cpu_s`` (our CPU-time median)
+    also ``cpu_ratio``, of the CPU-time medians of the running thread: on a loaded
+    machine a short run waits for a core for a larger fraction of its wall time than a
+    long one, and the CPU ratio is the steadier figure (a baseline with solver threads,
+    IPOPT, is undercounted by it).
+    """
     med = float(stats["median_s"])
-    row = {"median_s": med, "cpu_median_s": stats.get("cpu_median_s"),
+    cpu = stats.get("cpu_median_s")
+    row = {"median_s": med, "cpu_median_s": cpu,
            "spread": stats.get("spread"), "error": error,
            "ratio": med / ours_median_s if ours_median_s > 0 else None,
            "description": description, "available": True}
+    if ours_cpu_s and cpu is not None:
+        row["cpu_ratio"] = float(cpu) / ours_cpu_s
     row.update(extra)
     return row
 

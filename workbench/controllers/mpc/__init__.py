@@ -91,14 +91,17 @@ Layout
     :class:`NMPC`: settings, their checks, the controller protocol.
 :mod:`.results`
     :class:`StepInfo`, :class:`NMPCState`, :class:`Solution`.
+:mod:`.fast`
+    :class:`CompiledNMPC`: the whole sample (modes rti, sqp) as one compiled C call.
 :mod:`.baselines`
     :class:`Recorder` (solve times) and :class:`DoMPC` (the same problem in do-mpc).
 """
 
 from .baselines import DoMPC, Recorder
 from .controller import NMPC
+from .fast import CompiledNMPC
 from .model import NMPC_STATES, STATE_EFFECTS, horizon_reference, prediction_model
 from .results import NMPCState, Solution, StepInfo
 
-__all__ = ["NMPC", "NMPCState", "StepInfo", "Solution", "Recorder", "DoMPC", "prediction_model",
+__all__ = ["NMPC", "CompiledNMPC", "NMPCState", "StepInfo", "Solution", "Recorder", "DoMPC", "prediction_model",
            "horizon_reference", "STATE_EFFECTS", "NMPC_STATES"]

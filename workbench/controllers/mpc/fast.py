@@ -8,8 +8,9 @@ a cold start and then to the shifted previous plan on failure. The Gauss-Newton 
 (:func:`.qp.sqp_step`: prep, DAQP, post) is generated as C by CasADi with the QP
 solver inside (DAQP's own C library, the static ``libdaqpstat.a`` shipped with
 CasADi, linked in); a hand-written C driver around it does the rest of the sample.
-Python does per sample: four numbers into a preallocated buffer and one ctypes
-call; no Python object is made.
+Python does per sample: four numbers into a preallocated buffer, one ctypes call,
+the command returned as a float; no array or memory object is made after the first
+sample.
 
 The step is built on the Problem's CasADi functions (:func:`.qp.prepare`,
 :func:`.qp.apply_step`), so a change of the problem (constraints, model) flows in;
