@@ -102,6 +102,9 @@ def test_compiled_memory_reports_the_last_sample(rig25, fast):
     assert np.allclose(mem.X[:, 0] * fast.pb.sx, [0.2, 0.0, 4e5, 4e5], rtol=1e-12)
     assert u == pytest.approx(fast.pb.u_c + fast.pb.u_s * mem.U[0], rel=1e-14)
     assert mem.r_prev == 0.25 and mem.t == 0.0
+    # the phases are timed inside the sample: each > 0, together within the sample
+    prep, qp, post, whole = mem.phase_times()
+    assert min(prep, qp, post) > 0.0 and prep + qp + post <= whole
     mem2, _ = fast.update(mem, 0.25, y)
     assert mem2 is mem and mem.t == pytest.approx(0.01)
     with pytest.raises(InputError, match="p_b"):

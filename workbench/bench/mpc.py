@@ -72,6 +72,8 @@ def lockstep(plant, controllers: dict, ref, duration: float, nmpc) -> dict[str, 
             run["mem"], u = c.update(run["mem"], float(r[k]), y)
             run["wall"].append(time.perf_counter() - t0)
             run["cpu"].append(time.thread_time() - c0)
+            if hasattr(run["mem"], "phase_times"):         # the compiled sample's own
+                run.setdefault("phases", []).append(run["mem"].phase_times())
             run["u"][k] = u = float(np.clip(u, lo, hi))
             run["state"] = sim.step(run["state"], u, T)[-1]
             run["x"][k + 1], run["v"][k + 1] = run["state"][idx[0]], run["state"][idx[1]]
@@ -156,11 +158,21 @@ def _alone(plant, mine: dict, nmpc, ref, duration: float, plain_from) -> dict:
     for k, run in runs.items():
         sc = _scores(run, nmpc, nmpc.sample_time)
         out[k] = {q: sc[q] for q in ("median_s", "cpu_median_s", "cpu_p99_ms", "cost")}
+        if "phases" in run:
+            out[k]["phases_us"] = phase_medians(run)
     if "plain_rti_osqp" in out:
         for k in mine:
             out[k]["ratio_plain_rti_osqp"] = (out["plain_rti_osqp"]["median_s"]
                                               / out[k]["median_s"])
     return out
+
+
+def phase_medians(run: dict) -> dict[str, float]:
+    """us, medians over the run's samples of the compiled sample's phases (prep, QP,
+    post, the whole sample in C) and of the update as Python saw it (``update``)."""
+    ph = 1e6 * np.median(np.asarray(run["phases"]), axis=0)
+    return {"prep": float(ph[0]), "qp": float(ph[1]), "post": float(ph[2]),
+            "sample_in_c": float(ph[3]), "update": 1e6 * float(np.median(run["wall"]))}
 
 
 def _compiled(ctrls: dict, jit: bool) -> tuple[dict, str | None]:
@@ -240,6 +252,7 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
                                "description": "the same NMPC through NMPC.update (Python "
                                               "around the compiled step)"},
             "rti_breakdown": rti_breakdown(nmpc, runs["rti_uncompiled"]),
+            "compiled_phases_us": phase_medians(runs["rti"]) if "phases" in runs["rti"] else None,
             "sqp2": {**sc["sqp2"], "error": sc["sqp2"]["cost"] / sc["sqp"]["cost"] - 1.0,
                      "description": "ours with at most 2 Gauss-Newton steps per sample "
                                     "(a second only where the first moved the plan by more "

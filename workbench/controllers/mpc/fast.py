@@ -36,7 +36,7 @@ import numpy as np
 from ...errors import InputError
 from ...integrate.jit import CompileError, have_compiler, shared_library
 from .model import NMPC_STATES, V_SCALE
-from .qp import sqp_step
+from .qp import apply_step, prepare, qp_solver
 from .results import StepInfo
 
 __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
@@ -45,6 +45,8 @@ __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
 _CFG = ("sx0", "sx1", "sx2", "sx3", "L", "T", "rate_limit", "r_lo", "r_hi", "max_it",
         "tol", "rti", "warm", "u_c", "u_s", "v_scale")
 
+#: compiled NMPCs of one horizon alive at once in a process (the QP's memory pool)
+_MAX_LIVE = 64
 #: C compiler flags of the step (no -ffast-math: the step tests for NaN)
 _FLAGS = tuple(os.environ.get("WB_FAST_FLAGS", "-O2").split())
 
@@ -57,6 +59,8 @@ _DRIVER = r"""
 #define NN %(N)d
 #define NP %(NP)d
 #define NXN (NX * (NN + 1))
+#define NZ %(NZ)d
+#define NC %(NC)d
 %(CFG)s
 #define C_P %(NCFG)d
 /* memory layout */
@@ -73,50 +77,89 @@ _DRIVER = r"""
 #define M_RESTARTED (M_OK + 1)
 #define M_VIOL (M_RESTARTED + 1)
 #define M_TIME (M_VIOL + NX)
-#define M_SIZE (M_TIME + 1)
+#define M_TPHASE (M_TIME + 1)   /* s, of the last sample: prep, QP, post; then samples */
+#define M_SIZE (M_TPHASE + 4)
 
 typedef struct {
-  const casadi_real **arg; casadi_real **res; casadi_int *iw; casadi_real *w; int mem;
+  const casadi_real **arg; casadi_real **res; casadi_int *iw; casadi_real *w;
+  int mem[3];
   double cfg[C_P + NP];
   double X[NXN], U[NN], Xn[NXN], Un[NN], u0, viol[NX], ok, stp, dd;
   double R[NN + 1], VR[NN + 1], zm[NX], zp[NX];
+  /* the QP between prep and post */
+  double H[NZ * NZ], g[NZ], A[NC * NZ], lba[NC], uba[NC], lbx[NZ], ubx[NZ];
+  double hh[NXN], G[NXN * NN], Xs[NXN], Us[NN], dw[NZ];
+  double tphase[3];
 } wb_fast_t;
+
+static double now(void) {
+  struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
 
 int wb_fast_memory_size(void) { return M_SIZE; }
 int wb_fast_config_size(void) { return C_P + NP; }
 
 void wb_fast_free(wb_fast_t *h) {
   if (!h) return;
-  wb_nmpc_step_release(h->mem);
-  wb_nmpc_step_decref();
+  if (h->mem[0] >= 0) { wb_nmpc_prep_release(h->mem[0]); wb_nmpc_prep_decref(); }
+  if (h->mem[1] >= 0) { wb_nmpc_qp_release(h->mem[1]); wb_nmpc_qp_decref(); }
+  if (h->mem[2] >= 0) { wb_nmpc_post_release(h->mem[2]); wb_nmpc_post_decref(); }
   free(h->arg); free(h->res); free(h->iw); free(h->w); free(h);
 }
 
+#define WB_MAX(a, b) ((a) > (b) ? (a) : (b))
 wb_fast_t *wb_fast_new(const double *cfg) {
-  casadi_int na, nr, ni, nw;
+  casadi_int sz[3][4], na = 12, nr = 12, ni = 1, nw = 1; int k;
   wb_fast_t *h = (wb_fast_t *)calloc(1, sizeof(wb_fast_t));
   if (!h) return 0;
-  wb_nmpc_step_incref();
-  wb_nmpc_step_work(&na, &nr, &ni, &nw);
-  h->arg = (const casadi_real **)malloc(sizeof(casadi_real *) * (na > 11 ? na : 11));
-  h->res = (casadi_real **)malloc(sizeof(casadi_real *) * (nr > 7 ? nr : 7));
-  h->iw = (casadi_int *)malloc(sizeof(casadi_int) * (ni > 1 ? ni : 1));
-  h->w = (casadi_real *)malloc(sizeof(casadi_real) * (nw > 1 ? nw : 1));
-  h->mem = wb_nmpc_step_checkout();
-  if (!h->arg || !h->res || !h->iw || !h->w || h->mem < 0) { wb_fast_free(h); return 0; }
+  h->mem[0] = h->mem[1] = h->mem[2] = -1;
+  wb_nmpc_prep_work(&sz[0][0], &sz[0][1], &sz[0][2], &sz[0][3]);
+  wb_nmpc_qp_work(&sz[1][0], &sz[1][1], &sz[1][2], &sz[1][3]);
+  wb_nmpc_post_work(&sz[2][0], &sz[2][1], &sz[2][2], &sz[2][3]);
+  for (k = 0; k < 3; ++k) {
+    na = WB_MAX(na, sz[k][0]); nr = WB_MAX(nr, sz[k][1]);
+    ni = WB_MAX(ni, sz[k][2]); nw = WB_MAX(nw, sz[k][3]);
+  }
+  h->arg = (const casadi_real **)malloc(sizeof(casadi_real *) * na);
+  h->res = (casadi_real **)malloc(sizeof(casadi_real *) * nr);
+  h->iw = (casadi_int *)malloc(sizeof(casadi_int) * ni);
+  h->w = (casadi_real *)malloc(sizeof(casadi_real) * nw);
+  wb_nmpc_prep_incref(); h->mem[0] = wb_nmpc_prep_checkout();
+  wb_nmpc_qp_incref(); h->mem[1] = wb_nmpc_qp_checkout();
+  wb_nmpc_post_incref(); h->mem[2] = wb_nmpc_post_checkout();
+  if (!h->arg || !h->res || !h->iw || !h->w || h->mem[0] < 0 || h->mem[1] < 0
+      || h->mem[2] < 0) { wb_fast_free(h); return 0; }
   memcpy(h->cfg, cfg, sizeof(double) * (C_P + NP));
   return h;
 }
 
-/* one Gauss-Newton step from h->X, h->U; 1 on success (then h->Xn, h->Un are the plan) */
+/* one Gauss-Newton step from h->X, h->U (qp.sqp_step: prep, QP, post, each timed);
+   1 on success (then h->Xn, h->Un are the plan) */
 static int step(wb_fast_t *h, double sh, double up, double dprev, double est) {
-  const double *a[11]; int i;
+  int i; double t0 = now(), t1, t2;
+  const double *a[11];
   a[0] = h->X; a[1] = h->U; a[2] = &sh; a[3] = h->zm; a[4] = h->R; a[5] = h->VR; a[6] = &up;
   a[7] = h->zp; a[8] = &dprev; a[9] = &est; a[10] = h->cfg + C_P;
   for (i = 0; i < 11; ++i) h->arg[i] = a[i];
+  h->res[0] = h->H; h->res[1] = h->g; h->res[2] = h->A; h->res[3] = h->lba;
+  h->res[4] = h->uba; h->res[5] = h->lbx; h->res[6] = h->ubx; h->res[7] = h->hh;
+  h->res[8] = h->G; h->res[9] = h->Xs; h->res[10] = h->Us; h->res[11] = &h->dd;
+  if (wb_nmpc_prep(h->arg, h->res, h->iw, h->w, h->mem[0])) return 0;
+  t1 = now();
+  h->arg[0] = h->H; h->arg[1] = h->g; h->arg[2] = h->A; h->arg[3] = h->lba;
+  h->arg[4] = h->uba; h->arg[5] = h->lbx; h->arg[6] = h->ubx;
+  for (i = 7; i < 12; ++i) h->arg[i] = 0;          /* no initial guess, no q, p */
+  h->res[0] = h->dw;
+  for (i = 1; i < 4; ++i) h->res[i] = 0;
+  if (wb_nmpc_qp(h->arg, h->res, h->iw, h->w, h->mem[1])) return 0;
+  t2 = now();
+  h->arg[0] = h->Xs; h->arg[1] = h->Us; h->arg[2] = h->hh; h->arg[3] = h->G;
+  h->arg[4] = h->dw; h->arg[5] = h->cfg + C_P;
   h->res[0] = h->Xn; h->res[1] = h->Un; h->res[2] = &h->u0; h->res[3] = h->viol;
-  h->res[4] = &h->ok; h->res[5] = &h->stp; h->res[6] = &h->dd;
-  if (wb_nmpc_step(h->arg, h->res, h->iw, h->w, h->mem)) return 0;
+  h->res[4] = &h->ok; h->res[5] = &h->stp;
+  if (wb_nmpc_post(h->arg, h->res, h->iw, h->w, h->mem[2])) return 0;
+  h->tphase[0] += t1 - t0; h->tphase[1] += t2 - t1; h->tphase[2] += now() - t2;
   return h->ok != 0.0;
 }
 
@@ -200,6 +243,8 @@ int wb_fast_sample(wb_fast_t *h, double *m, const double *y, double r, double *u
   *u = c[C_u_c] + c[C_u_s] * h->U[0];
   clock_gettime(CLOCK_MONOTONIC, &t1);
   m[M_TIME] = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+  for (i = 0; i < 3; ++i) { m[M_TPHASE + i] = h->tphase[i]; h->tphase[i] = 0.0; }
+  m[M_TPHASE + 3] += 1.0;
   return ok;
 }
 """
@@ -225,14 +270,33 @@ def _daqp_paths() -> tuple[str, str] | None:
 
 def _source(pb) -> str:
     """The generated step (prep, DAQP, post) followed by the driver."""
-    step = sqp_step(pb, jit=False)
+    nz, nc = pb.N + pb.ns, 2 * pb.N * len(pb.soft)
+    funs = (prepare(pb), qp_solver("daqp", nz, nc), apply_step(pb))
+    _check_layout(*funs)
     with tempfile.TemporaryDirectory(prefix="wb_fast_") as tmp:
         gen = ca.CodeGenerator("wb_fast.c", {"with_header": False})
-        gen.add(step)
+        for f in funs:
+            gen.add(f)
         gen.generate(tmp + os.sep)
         generated = Path(tmp, "wb_fast.c").read_text()
     cfg = "\n".join(f"#define C_{k} {i}" for i, k in enumerate(_CFG))
-    return generated + _DRIVER % {"N": pb.N, "NP": pb.P.size, "CFG": cfg, "NCFG": len(_CFG)}
+    return generated + _DRIVER % {"N": pb.N, "NP": pb.P.size, "CFG": cfg, "NCFG": len(_CFG),
+                                  "NZ": nz, "NC": nc}
+
+
+def _check_layout(prep, qp, post) -> None:
+    """The driver passes prep's outputs to the QP and to post as dense buffers: refuse
+    a problem whose functions no longer fit that (rather than compute nonsense)."""
+    pairs = [(prep.sparsity_out(i), qp.sparsity_in(i)) for i in range(7)]
+    pairs += [(prep.sparsity_out(a), post.sparsity_in(b))
+              for a, b in ((9, 0), (10, 1), (7, 2), (8, 3))]
+    pairs.append((qp.sparsity_out(0), post.sparsity_in(4)))
+    dense = [prep.sparsity_out(i) for i in range(prep.n_out())]
+    dense += [post.sparsity_out(i) for i in range(post.n_out())]
+    if (prep.n_out() != 12 or post.n_out() != 6 or any(a != b for a, b in pairs)
+            or not all(sp.is_dense() for sp in dense)):
+        raise CompileError("the NMPC's prep / QP / post functions changed their layout; "
+                           "the compiled sample's driver (controllers.mpc.fast) must follow")
 
 
 class CompiledMemory:
@@ -268,6 +332,14 @@ class CompiledMemory:
     z = property(lambda self: self.buf[self._at("z"):self._at("z") + 4])
     d = property(lambda self: float(self.buf[self._at("d")]))
     t = property(lambda self: float(self.buf[self._at("t")]))
+
+    def phase_times(self) -> tuple[float, float, float, float]:
+        """s (wall) of the last sample: the compiled prep (shift, estimate, interval
+        maps, condensing), the QP (DAQP), post (plan update), each summed over the
+        sample's Gauss-Newton steps, and the whole sample in C."""
+        i = self._at("it") + 8
+        t = self.buf[i:i + 3]
+        return float(t[0]), float(t[1]), float(t[2]), float(self.buf[i - 1])
 
     def step_info(self, pb) -> StepInfo:
         """The last update's report, violations in SI units."""
@@ -314,7 +386,7 @@ class CompiledNMPC:
         self.nmpc, self.sample_time = nmpc, nmpc.sample_time
         self.pb = pb = nmpc._problem
         inc, lib = _daqp_paths()
-        path, _ = shared_library(f"wb_fast_n{pb.N}", _source(pb), ((*_FLAGS, f"-I{inc}"),),
+        path, _ = shared_library(f"wb_fast_n{pb.N}", _source(pb), ((*_FLAGS, f"-I{inc}", f"-DCASADI_MAX_NUM_THREADS={_MAX_LIVE}"),),
                                  libs=(lib,))
         self._lib = so = ctypes.CDLL(str(path))
         so.wb_fast_new.restype = ctypes.c_void_p
@@ -335,7 +407,8 @@ class CompiledNMPC:
             raise CompileError("the compiled NMPC step does not match its settings")
         self._h = so.wb_fast_new(self._cfg.ctypes.data)
         if not self._h:
-            raise MemoryError("the compiled NMPC step could not allocate its work")
+            raise MemoryError(f"the compiled NMPC step could not allocate its work (at most "
+                              f"{_MAX_LIVE} compiled NMPCs of one horizon alive at once)")
         weakref.finalize(self, so.wb_fast_free, self._h)
         self._y = np.zeros(4)
         self._u = np.zeros(1)
