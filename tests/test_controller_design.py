@@ -229,3 +229,12 @@ def test_fl_friction_feedforward_reduces_the_sine_error_on_the_precision_rig(mon
     monkeypatch.setattr(compensation.FrictionModel, "from_plant", classmethod(lambda cls, pl: None))
     bare = evaluate_design(plant, "fl", reference=ref, jit=False).validation.metrics.sine_error_max
     assert fed < 0.85 * bare, (fed, bare)
+
+
+def test_report_says_how_each_law_uses_the_friction_model():
+    from workbench.controllers.evaluation import _friction_text
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    said = {k: _friction_text(design(plant, k, jit=False).inner.inner) for k in ("pid", "fl", "nmpc")}
+    assert said["fl"].startswith("plant file's friction (Coulomb 15 N, static 25 N)")
+    assert said["nmpc"] == "in the prediction model (smooth form)"
+    assert said["pid"] == "none (integral action)"
