@@ -8,7 +8,9 @@
 2. Each controller is what ``workbench.controllers.design(plant, kind)`` returns from
    the plant file alone: a Kalman observer (velocity and unmodelled force from x,
    p_a, p_b), the deadband inverted, a hold lock against stick-slip hunting, the
-   reference smoothed to the axis's limits and fed forward (FL and NMPC).
+   reference smoothed to the axis's limits and fed forward (FL and NMPC), the plant
+   file's dry friction fed forward at the reference's velocity (FL; the NMPC
+   predicts with it).
 3. Each is validated on the full plant over the precision profile and judged by the
    precision specification (steady state within one quantum, overshoot <= 2 %, worst
    error on the 60 mm, 0.5 Hz sine <= 1 mm); the published rig results (0.05 mm

@@ -135,6 +135,7 @@ class DesignEvaluation:
               ("hold lock", f"valve closed within {comp.lock_band * 1e3:.3f} mm at under "
                             f"{comp.lock_speed * 1e3:g} mm/s, released beyond "
                             f"{comp.release_band * 1e3:.3f} mm" if comp.lock_band else "off"),
+              ("friction feedforward", _friction_text(comp.inner)),
               ("trajectory limits", f"{self.limits.speed:.3g} m/s, {self.limits.acceleration:.3g} "
                                     f"m/s^2, {self.limits.jerk:.4g} m/s^3"),
               ("sensors", f"position quantum {self.quantum * 1e3:.4f} mm, pressure noise "
@@ -159,6 +160,21 @@ class DesignEvaluation:
                                  "with continuing command activity"),
             ]),
         ]
+
+
+def _friction_text(law) -> str:
+    """How the law uses the plant file's dry friction, in words."""
+    fr = getattr(law, "friction", None)
+    if fr is not None:
+        return (f"plant file's friction (Coulomb {fr.coulomb:g} N, static {fr.static:g} N) at "
+                f"the reference's velocity, handed over to the force estimate in "
+                f"{law.friction_lag * 1e3:.1f} ms")
+    model = getattr(law, "model", None)
+    if model is not None and "dry_friction" in getattr(model, "effects", ()):
+        return "in the prediction model (smooth form)"
+    if getattr(law, "needs", ()) and "v" in law.needs and hasattr(law, "ki"):
+        return "none (integral action)"
+    return "none (the observer's force estimate)"
 
 
 def evaluate_design(plant, kind: str, *, reference=None, spec=None, position_bits: int = 12,

@@ -398,13 +398,14 @@ class FeedbackLinearizing:
         sine. The law therefore adds (1) the model friction's rate at the
         reference, F'(v_r) a_r / m, to the reference jerk (the force rate the known
         friction change needs), and (2) to the force estimate the part of the model
-        friction at the *reference's* velocity that the feedback has not yet taken
+        friction at the *reference's* velocity that the estimate has not yet taken
         over, F(v_r) - F_lag, F_lag being F(v_r) through a first-order lag of
         ``friction_lag`` s. Taken at the reference's velocity, not the estimated
         one, it adds no sensor noise at a hold (v_r = 0: nothing).
-    friction_lag : s, time in which the feedback takes the friction over from the
-        feedforward (:func:`~workbench.controllers.design.design`: 1 / bandwidth,
-        the error poles' time constant); 0: the feedforward is the rate term only.
+    friction_lag : s, time in which the outside estimate takes the friction over
+        from the feedforward (:func:`~workbench.controllers.design.design`: the
+        observer's time constant, so the friction is never counted twice); 0: the
+        feedforward is the rate term only.
     """
 
     model: DriveModel
