@@ -15,8 +15,8 @@ from paper_001 import (A_SOUND, BAND_FLOORS, DELAY_THRESHOLD, DELAY_TOL, DT_INTE
                        HOLD, NULL_OFFSET, PAPER, PLANT, STEP, TI_SETTLING, TITLE, TRANSIENT_BAND,
                        TRIES, eq4_attenuation)
 
-#: Tube bores sold as polyurethane tubing, m: 3 x 2.1 .. 8 x 5.7 mm (the fitted bore
-#: 'is a real tube' when inside).
+#: Tube bores of common polyurethane tubing, m: about 2 mm (3 mm outside diameter) to
+#: 6 mm (8 mm), the lower end 10 % below 2 mm (the fitted bore 'is a real tube' inside).
 TUBE_RANGE = (0.0018, 0.006)
 
 
@@ -365,10 +365,17 @@ def disagreement_section(res, steps, td, fit, sizes) -> rp.Section:
         text += (f"With the a-priori 4 mm bore the 10 m drive settles {prior['dt']:+.3f} s "
                  f"relative to 1 m (half-way shift {prior['shift']:.3f} s): the paper's 0.4 s "
                  "does not appear. ")
+    other = {r["result"]: r["agrees"] for r in res}
+    held = [k for k, name in (("pressure delay", "pressure delay, 10 m line against 1 m"),
+                              ("attenuation", "amplitude decay with the longer line"),
+                              ("the PID's validation on both lines",
+                               "PID positioning works with both line lengths"))
+            if other.get(name)]
     text += (f"It appears at a {_mm(fit['d'])} mm bore [{_mm(fit['lo'])}, {_mm(fit['hi'])}] "
-             "(a 3 or 4 mm outside-diameter tube); the pressure delay, the attenuation and the "
-             "PID's validation on both lines hold there (rows above). The fit depends on the "
-             "step size the paper does not give: at the fitted bore "
+             "(polyurethane tubes of 3 and 4 mm outside diameter have bores of about 2 and 2.5 mm); "
+             + (f"there the {', '.join(held)} agree with the paper (rows above). " if held else
+                "there none of the other rows agrees. ")
+             + "The fit depends on the step size the paper does not give: at the fitted bore "
              + "; ".join(f"{s['step'] * 1e3:g} mm steps give {_s(s['dt'])} s" for s in sizes)
              + " (the staircase's 100 mm steps: fitted): the tube's flow limit makes large "
              "steps slow on the 10 m line.")
