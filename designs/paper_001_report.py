@@ -140,7 +140,7 @@ def lines_section(steps: dict, d: float) -> rp.Section:
             f"bar) 9 m more line give a factor {eq4:.2f} on the wave front; the measured peak "
             f"flow ratio is {steps[10.0]['peak_flow'] / steps[1.0]['peak_flow']:.2f}: the peak "
             "also loses what the longer line's volume stores and its resistance holds back. "
-            f"The tube, not the valve, limits the flow at this bore: {valve_limit(steps) * 1e3:.1f} "
+            f"The tube, not the valve, limits the flow at this bore: up to {valve_limit(steps) * 1e3:.1f} "
             f"g/s could pass the valve at 8 V (choked, C p_s rho0 times the 0.6 opening), "
             f"{steps[1.0]['q_a'][-1] * 1e3:.2f} g/s enter chamber a through 1 m of tube at the "
             "step's end."),
