@@ -73,7 +73,8 @@ def config_section(pls: dict, valve: tuple, fit: dict) -> rp.Section:
     c, b, dev = valve
     rows = [["line lengths", "1 and 10 m", "paper (Sec. 'Experimental study')"],
             ["valve sonic conductance C", f"{c:.4g} m^3/(s Pa) (file: "
-             f"{prm['valve.sonic_conductance']:.4g})", "DERIVED from eq. (2)'s Cv = 0.274, X_T = 1"],
+             f"{prm['valve.sonic_conductance']:.4g})",
+             "DERIVED from eq. (2)'s Cv = 0.274, X_T = 1"],
             ["valve critical ratio b", f"{b:.3f} (file: {prm['valve.critical_pressure_ratio']:g})",
              f"DERIVED: ISO ellipse nearest eq. (2)'s shape (within {dev:.1%} of choked flow)"],
             ["chamber process", "isothermal (k = 1)", "paper, eq. (6) has no heat-capacity ratio"],
@@ -140,7 +141,8 @@ def lines_section(steps: dict, d: float) -> rp.Section:
             f"bar) 9 m more line give a factor {eq4:.2f} on the wave front; the measured peak "
             f"flow ratio is {steps[10.0]['peak_flow'] / steps[1.0]['peak_flow']:.2f}: the peak "
             "also loses what the longer line's volume stores and its resistance holds back. "
-            f"The tube, not the valve, limits the flow at this bore: up to {valve_limit(steps) * 1e3:.1f} "
+            "The tube, not the valve, limits the flow at this bore: up to "
+            f"{valve_limit(steps) * 1e3:.1f} "
             f"g/s could pass the valve at 8 V (choked, C p_s rho0 times the 0.6 opening), "
             f"{steps[1.0]['q_a'][-1] * 1e3:.2f} g/s enter chamber a through 1 m of tube at the "
             "step's end."),
@@ -372,7 +374,8 @@ def disagreement_section(res, steps, td, fit, sizes) -> rp.Section:
                                "PID positioning works with both line lengths"))
             if other.get(name)]
     text += (f"It appears at a {_mm(fit['d'])} mm bore [{_mm(fit['lo'])}, {_mm(fit['hi'])}] "
-             "(polyurethane tubes of 3 and 4 mm outside diameter have bores of about 2 and 2.5 mm); "
+             "(polyurethane tubes of 3 and 4 mm outside diameter have bores of about 2 and "
+             "2.5 mm); "
              + (f"there the {', '.join(held)} agree with the paper (rows above). " if held else
                 "there none of the other rows agrees. ")
              + "The fit depends on the step size the paper does not give: at the fitted bore "
