@@ -15,8 +15,8 @@ from paper_001 import (A_SOUND, BAND_FLOORS, DELAY_THRESHOLD, DELAY_TOL, DT_INTE
                        HOLD, NULL_OFFSET, PAPER, PLANT, STEP, TI_SETTLING, TITLE, TRANSIENT_BAND,
                        TRIES, eq4_attenuation)
 
-#: Tube bores sold as polyurethane tubing, m: 3 x 2.1 .. 8 x 5.7 mm (the fitted bore
-#: 'is a real tube' when inside).
+#: Tube bores of common polyurethane tubing, m: about 2 mm (3 mm outside diameter) to
+#: 6 mm (8 mm), the lower end 10 % below 2 mm (the fitted bore 'is a real tube' inside).
 TUBE_RANGE = (0.0018, 0.006)
 
 
@@ -73,7 +73,8 @@ def config_section(pls: dict, valve: tuple, fit: dict) -> rp.Section:
     c, b, dev = valve
     rows = [["line lengths", "1 and 10 m", "paper (Sec. 'Experimental study')"],
             ["valve sonic conductance C", f"{c:.4g} m^3/(s Pa) (file: "
-             f"{prm['valve.sonic_conductance']:.4g})", "DERIVED from eq. (2)'s Cv = 0.274, X_T = 1"],
+             f"{prm['valve.sonic_conductance']:.4g})",
+             "DERIVED from eq. (2)'s Cv = 0.274, X_T = 1"],
             ["valve critical ratio b", f"{b:.3f} (file: {prm['valve.critical_pressure_ratio']:g})",
              f"DERIVED: ISO ellipse nearest eq. (2)'s shape (within {dev:.1%} of choked flow)"],
             ["chamber process", "isothermal (k = 1)", "paper, eq. (6) has no heat-capacity ratio"],
@@ -140,7 +141,8 @@ def lines_section(steps: dict, d: float) -> rp.Section:
             f"bar) 9 m more line give a factor {eq4:.2f} on the wave front; the measured peak "
             f"flow ratio is {steps[10.0]['peak_flow'] / steps[1.0]['peak_flow']:.2f}: the peak "
             "also loses what the longer line's volume stores and its resistance holds back. "
-            f"The tube, not the valve, limits the flow at this bore: {valve_limit(steps) * 1e3:.1f} "
+            "The tube, not the valve, limits the flow at this bore: up to "
+            f"{valve_limit(steps) * 1e3:.1f} "
             f"g/s could pass the valve at 8 V (choked, C p_s rho0 times the 0.6 opening), "
             f"{steps[1.0]['q_a'][-1] * 1e3:.2f} g/s enter chamber a through 1 m of tube at the "
             "step's end."),
@@ -365,10 +367,18 @@ def disagreement_section(res, steps, td, fit, sizes) -> rp.Section:
         text += (f"With the a-priori 4 mm bore the 10 m drive settles {prior['dt']:+.3f} s "
                  f"relative to 1 m (half-way shift {prior['shift']:.3f} s): the paper's 0.4 s "
                  "does not appear. ")
+    other = {r["result"]: r["agrees"] for r in res}
+    held = [k for k, name in (("pressure delay", "pressure delay, 10 m line against 1 m"),
+                              ("attenuation", "amplitude decay with the longer line"),
+                              ("the PID's validation on both lines",
+                               "PID positioning works with both line lengths"))
+            if other.get(name)]
     text += (f"It appears at a {_mm(fit['d'])} mm bore [{_mm(fit['lo'])}, {_mm(fit['hi'])}] "
-             "(a 3 or 4 mm outside-diameter tube); the pressure delay, the attenuation and the "
-             "PID's validation on both lines hold there (rows above). The fit depends on the "
-             "step size the paper does not give: at the fitted bore "
+             "(polyurethane tubes of 3 and 4 mm outside diameter have bores of about 2 and "
+             "2.5 mm); "
+             + (f"there the {', '.join(held)} agree with the paper (rows above). " if held else
+                "there none of the other rows agrees. ")
+             + "The fit depends on the step size the paper does not give: at the fitted bore "
              + "; ".join(f"{s['step'] * 1e3:g} mm steps give {_s(s['dt'])} s" for s in sizes)
              + " (the staircase's 100 mm steps: fitted): the tube's flow limit makes large "
              "steps slow on the 10 m line.")

@@ -101,7 +101,8 @@ def test_transition_time_recomputed_from_the_runs(run):
     dt = float(np.mean(_settling(out / "validation_10m.csv", 0.05)
                        - _settling(out / "validation_1m.csv", 0.05)))
     assert dt == pytest.approx(s["transients_s"]["dt"], abs=3e-3)
-    shift = float(np.mean(_half_way(out / "validation_10m.csv") - _half_way(out / "validation_1m.csv")))
+    shift = float(np.mean(_half_way(out / "validation_10m.csv")
+                          - _half_way(out / "validation_1m.csv")))
     assert shift == pytest.approx(s["transients_s"]["shift"], abs=3e-3)
     assert shift > 0.02                       # later, by more than two control samples
     assert _rows(s)["position transient later with 10 m lines"]["agrees"]
@@ -168,7 +169,8 @@ def test_valve_derived_from_the_papers_cv():
     q_std = 1360.0 * PAPER_CV * (1.0 / psia) * (2.0 / 3.0) * np.sqrt(PAPER_XT / t_r) * scfh
     rho_std = 101325.0 / (287.05 * (60.0 + 459.67) * 5.0 / 9.0)
     c_expected = q_std * rho_std / 1.185              # m^3/(s Pa), per Pa of p1
-    data = tomllib.loads((ROOT / "designs" / "plants" / "papers" / "iliev_lines_1m.toml").read_text())
+    data = tomllib.loads(
+        (ROOT / "designs" / "plants" / "papers" / "iliev_lines_1m.toml").read_text())
     assert data["valve"]["sonic_conductance"] == pytest.approx(c_expected, rel=5e-4)
     mod = runpy.run_path(str(ROOT / "designs" / "paper_001.py"), run_name="valve")
     c, b, dev = mod["valve_from_cv"](PAPER_CV, PAPER_XT)
