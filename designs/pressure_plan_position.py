@@ -386,7 +386,7 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
             [("verdict", status.outcome), ("feedback gains", f"kp {KP:g} V/m, kd {KD:g} V s/m")]
             + [(f"air drawn, {r}", f"{s['air_mass'] * 1e3:.3f} g"
                 + ("" if s["feasible"] else " (not feasible)")) for r, s in plan_sum.items()]
-            + [(f"{n}: max / RMS error", f"{m['max_error'] * 1e3:.2f} / {m['rms_error'] * 1e3:.3f} mm")
+            + [(f"{n}: max / RMS error", f"{m['max_error'] * 1e3:.3f} / {m['rms_error'] * 1e3:.3f} mm")
                for n, m in mets.items()]
             + [("run time", f"{time.perf_counter() - t_start:.1f} s" + (" (quick mode)" if quick else ""))])])
         doc = rp.Report(TITLE, subtitle="Pressure-trajectory inversion (paper 003) of a position "

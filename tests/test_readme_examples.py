@@ -181,3 +181,12 @@ def test_recording_case_as_the_readme_says(case, result, tmp_path, capsys):
     assert hint in message, message
     if "outside the" in hint:          # 0.6 m / 12.5 V are no factor-1000 slip: no unit hint
         assert "mm?" not in message and "mV?" not in message, message
+
+
+def test_the_readme_lists_every_unit_the_loader_knows():
+    from workbench.recording_units import UNIT_SCALES
+    start = README.index("Units by column:")
+    text = README[start:README.index("\n\n", start)]
+    listed = set(re.findall(r"[A-Za-z_/]+", text.split(":", 1)[1]))
+    known = {u for table in UNIT_SCALES.values() for u in table}
+    assert known <= listed, sorted(known - listed)

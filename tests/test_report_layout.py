@@ -438,3 +438,21 @@ def test_a_column_with_its_own_unit_keeps_one_format_in_a_table_of_quantities():
     # the value columns share one format per row unit across the row: 4 significant
     # digits of the row's smallest (13.3 -> 2 decimals, 8.0 -> 3 then the shared 0 dropped)
     assert [t[2:4] for t in own] == [("31.68", "13.30"), ("99.92", "8.00"), ("1.229", "5.017")]
+
+
+@pytest.mark.parametrize("n_par", [10, 13])
+def test_a_table_whose_last_row_is_tall_splits_instead_of_moving(tmp_path, n_par):
+    # paper_000's provenance run from a long pytest command line: 12 short rows and one
+    # of many lines after half a page of text. The split put all 12 short rows first and
+    # left the tall row alone (a widow); shrinking the room by one row at a time from the
+    # page's free space never changed that split, so the whole table moved and the page
+    # stayed 41 % empty. Now the first part ends one row earlier: 11 rows, then 2.
+    long = " ".join(f"tests/test_something_long_{i}.py" for i in range(40))
+    kv = rp.KeyValues([(f"key {i}", f"value {i}") for i in range(12)] + [("command line", long)])
+    doc = rp.Report("kv", sections=[rp.Section("a", [rp.Paragraph(LOREM * n_par)]),
+                                    rp.Section("Provenance", [kv])])
+    _, pdf_path = rp.write(doc, tmp_path)
+    fills = page_fill(pdf_path)
+    assert len(fills) == 2 and fills[0] >= 0.6, [round(f, 2) for f in fills]
+    pages = _pdf_pages_text(pdf_path)
+    assert "key 10" in pages[0] and "key 11" in pages[1] and "command line" in pages[1]

@@ -152,7 +152,10 @@ class KeepGroup(Flowable):
             excess = self._height(self.lead + [parts[0]], aw) - ah
             if excess <= 0 and last >= MIN_ROWS:  # the rest starts the next page
                 return [parts[0], FrameBreak()] + list(parts[1:])
-            room -= max(excess, 0) + _FUZZ + (parts[0]._rowHeights[-1] if excess <= 0 else 0)
+            if excess > 0:         # reportlab's estimate was too generous: take less
+                room -= excess + _FUZZ
+            else:                  # it fits but carries too few rows: end the first part one
+                room += excess - parts[0]._rowHeights[-1] - _FUZZ   # row earlier than it did
         return []
 
 
