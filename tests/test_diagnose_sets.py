@@ -131,7 +131,9 @@ class _FakeRefits:
         import numpy as np
         from workbench.diagnose.refit import FitResult
         cost = self.costs[frozenset(cand.name.split("+"))]
-        vals = {f.key: f.start for f in cand.free}
+        # effects at their start values, nominal values corrected by +20 %
+        vals = {f.key: f.start * (1.2 if "parameter_error" in cand.effect else 1.0)
+                for f in cand.free}
         return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values=vals,
                          std={}, ci95={}, cost=cost, signal_costs={}, seg_cost=None, grid=[],
                          fits={}, plant_values=cand.plant_values(vals),
@@ -205,3 +207,23 @@ def test_trade_off_of_two_members_names_the_separating_regimes():
     assert "leakage shows at rest (40 % of this recording)" in t["tells_apart"]
     assert "valve.sonic_conductance shows high flow / moving (60 % of this recording)" \
         in t["tells_apart"]
+
+
+def test_a_correction_below_min_correction_is_not_a_finding():
+    """A nominal-value correction earns nothing when no value moves by MIN_CORRECTION
+    (relative to the nominal, or to the scale for a nominal of 0); one value moved by
+    more is enough. Effects are never judged by this rule."""
+    from workbench.diagnose.candidates import JOINT_NOMINAL, candidates
+    from workbench.diagnose.sets import MIN_CORRECTION, _negligible
+    params = synth.concealed_case("none", seed=0).nominal
+    by = {c.name: c for c in candidates(params)}
+    joint = by[JOINT_NOMINAL]
+    fake = _FakeRefits({frozenset([JOINT_NOMINAL]): 1.0}, {"at rest": [True]}, 10.0)
+    res = fake.result(joint)
+    nominal = {f.key: params[f.key] for f in joint.free}
+    res.values = {k: v * (1 + 0.9 * MIN_CORRECTION) for k, v in nominal.items()}
+    assert _negligible(joint, res)
+    res.values = {**res.values, "supply.pressure": nominal["supply.pressure"]
+                  * (1 - 1.1 * MIN_CORRECTION)}
+    assert not _negligible(joint, res)
+    assert not _negligible(by["valve_offset"], fake.result(joint))

@@ -58,7 +58,7 @@ GAIN_MIN = 0.25
 SEG_WORSE = -0.25
 #: Rough cost of refitting each candidate (for scheduling the slow ones first).
 COST_ORDER = {"line_dynamics": 6.0, "dry_friction": 4.0, "leakage": 3.0, "supply_droop": 3.0,
-              "valve_dynamics": 3.0, "heat_transfer": 2.0}
+              "valve_dynamics": 3.0, "heat_transfer": 2.0, "parameter_error:nominal values": 3.0}
 #: Least-squares iterations of the screening refit of every candidate.
 SCREEN_NFEV = 3
 #: Candidates refitted fully after the screening.
