@@ -91,7 +91,7 @@ def prepare(pb) -> ca.Function:
                        [*out, X, U, d])
 
 
-def condense(pb) -> ca.Function:
+def condense(pb, Sym=ca.MX) -> ca.Function:
     """Condensed Gauss-Newton QP from interval sensitivities (SX, scalar code).
 
     Returns ``wb_nmpc_condense(A, B, c, dz0, X, U, R, VR, up, P) -> (H, g, A, lba, uba,
@@ -99,24 +99,24 @@ def condense(pb) -> ca.Function:
     zero moves h (nx, N + 1) with their sensitivity G (nx (N + 1), N) to the moves.
     """
     N, nx, ns = pb.N, pb.nx, pb.ns
-    A_ = ca.SX.sym("A", nx, nx * N)
-    B_ = ca.SX.sym("B", nx, N)
-    c = ca.SX.sym("c", nx, N)                          # shooting defects
-    dz0 = ca.SX.sym("dz0", nx)                         # measured - guessed x_0
-    X = ca.SX.sym("X", nx, N + 1)
-    U = ca.SX.sym("U", 1, N)
-    R = ca.SX.sym("R", 1, N + 1)
-    VR = ca.SX.sym("VR", 1, N + 1)
-    up = ca.SX.sym("up")
-    P = ca.SX.sym("P", pb.P.size)
+    A_ = Sym.sym("A", nx, nx * N)
+    B_ = Sym.sym("B", nx, N)
+    c = Sym.sym("c", nx, N)                          # shooting defects
+    dz0 = Sym.sym("dz0", nx)                         # measured - guessed x_0
+    X = Sym.sym("X", nx, N + 1)
+    U = Sym.sym("U", 1, N)
+    R = Sym.sym("R", 1, N + 1)
+    VR = Sym.sym("VR", 1, N + 1)
+    up = Sym.sym("up")
+    P = Sym.sym("P", pb.P.size)
     wx, wv, wdu, rho1, rho2, lo, hi = pb.unpack(P)
     # dz_k = h_k + G_k dw, G_k with k non-zero columns
-    hs, Gs = [dz0], [ca.SX(nx, 0)]
+    hs, Gs = [dz0], [Sym(nx, 0)]
     for k in range(N):
         A = A_[:, k * nx:(k + 1) * nx]
         Gs.append(ca.horzcat(ca.mtimes(A, Gs[-1]), B_[:, k]))
         hs.append(ca.mtimes(A, hs[-1]) + c[:, k])
-    Gf = [ca.horzcat(G, ca.SX(nx, N - G.shape[1])) for G in Gs]
+    Gf = [ca.horzcat(G, Sym(nx, N - G.shape[1])) for G in Gs]
     Hh = ca.horzcat(*hs)
     Xp = X + Hh                                        # states at dw = 0
     S = [ca.vertcat(*[Gf[k][i, :] for k in range(1, N + 1)]) for i in range(nx)]
@@ -131,8 +131,8 @@ def condense(pb) -> ca.Function:
           + wdu * ca.DM(D.T @ D))
     gc = (ca.mtimes(S[0].T, wx * ex) + ca.mtimes(S[1].T, wv * ev)
           + wdu * ca.mtimes(ca.DM(D.T), ca.mtimes(ca.DM(D), U.T) - ca.DM(e0) * up))
-    H = ca.diagcat(Hc, rho2 * ca.SX.eye(ns))
-    g = ca.vertcat(gc, rho1 * ca.SX.ones(ns))
+    H = ca.diagcat(Hc, rho2 * Sym.eye(ns))
+    g = ca.vertcat(gc, rho1 * Sym.ones(ns))
     one = ca.DM.ones(N, 1)
     rows, lb, ub = [], [], []
     for i, j in pb.soft:
