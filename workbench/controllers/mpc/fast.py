@@ -420,6 +420,22 @@ class CompiledNMPC:
     def kind(self) -> str:
         return f"NMPC ({self.nmpc.mode}, N = {self.nmpc.horizon}, compiled sample)"
 
+    def memory(self, plan=None) -> CompiledMemory:
+        """A fresh memory: before the first sample (``plan`` None), or holding ``plan``
+        = (X (4, N + 1), U (1, N), u_prev, r_prev, z (4,), d, t) of an
+        :class:`~.results.NMPCState` (scaled as there; r_prev m, d N, t s)."""
+        mem = CompiledMemory(self.pb.N, self._msize)
+        if plan is not None:
+            X, U, u_prev, r_prev, z, d, t = plan
+            n, b = 4 * (self.pb.N + 1), mem.buf
+            b[:n] = np.asarray(X, dtype=float).ravel(order="F")
+            b[n:n + self.pb.N] = np.asarray(U, dtype=float).ravel()
+            b[mem._at("u_prev")], b[mem._at("r_prev")] = u_prev, r_prev
+            b[mem._at("z"):mem._at("z") + 4] = z
+            b[mem._at("d")], b[mem._at("t")] = d, t
+            b[mem._at("t") + 1] = 1.0                  # started
+        return mem
+
     def reset(self) -> None:
         """No memory before the first sample (it starts from rest at the measured state)."""
         return None

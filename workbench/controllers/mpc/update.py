@@ -12,6 +12,10 @@ Per mode (see :mod:`workbench.controllers.mpc`):
     solution.
 
 If the solver fails the previous plan is applied, shifted.
+
+With the NMPC's ``compiled_sample`` on (and ``jit``), modes rti and sqp without a
+preview run the whole sample as one C call (:class:`.fast.CompiledNMPC`: the same
+plans, bit for bit on the tests); :func:`compiled_sample` says why not otherwise.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from ...errors import InputError
 from .model import NMPC_STATES, V_SCALE, horizon_reference
 from .results import NMPCState, Solution, StepInfo
 
-__all__ = ["advance", "solution"]
+__all__ = ["advance", "solution", "compiled_sample"]
 
 
 @dataclass(frozen=True)
@@ -93,6 +97,9 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     """
     t0 = time.perf_counter()
     c = pb.c
+    fast = compiled_sample(pb)[0]
+    if fast is not None:
+        return _advance_compiled(pb, fast, y, r, state, t0)
     try:
         zm = np.array([y[k] for k in NMPC_STATES], dtype=float) / pb.sx
     except KeyError as exc:
@@ -119,6 +126,54 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     w0 = float(U[0])
     info = _step_info(pb, it, ok, viol, restarted, time.perf_counter() - t0)
     return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info, t=t)
+
+
+def compiled_sample(pb):
+    """(the compiled sample of the problem's NMPC, None) or (None, why not); built at
+    the first call and kept on the problem. Off: the setting ``compiled_sample`` or
+    ``jit`` off, mode ipopt, a preview, a QP solver other than DAQP, no C compiler,
+    no DAQP library, or too many compiled NMPCs alive."""
+    got = getattr(pb, "_compiled_sample", None)
+    if got is not None:
+        return got
+    c = pb.c
+    why = None
+    if not getattr(c, "compiled_sample", False):
+        why = "compiled_sample is off"
+    elif not c.jit:
+        why = "jit is off"
+    elif c.mode not in ("rti", "sqp"):
+        why = f"mode {c.mode} runs in Python"
+    elif c.preview is not None:
+        why = "the compiled sample has no preview"
+    elif c.qp_solver != "daqp":
+        why = f"the compiled sample links DAQP, not {c.qp_solver}"
+    fast = None
+    if why is None:
+        from ...integrate.jit import CompileError
+        from .fast import CompiledNMPC, compiled_unavailable
+        why = compiled_unavailable()
+        if why is None:
+            try:
+                fast = CompiledNMPC(c)
+            except (CompileError, MemoryError) as exc:
+                why = str(exc)
+    pb._compiled_sample = got = (fast, why)
+    return got
+
+
+def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
+                      t0: float) -> NMPCState:
+    """:func:`advance` as one compiled C call: the memory copied into a fresh buffer
+    (the state passed in is not changed), the new state read out of it."""
+    mem = fast.memory(None if state is None else
+                      (state.X, state.U, state.u_prev, state.r_prev, state.z, state.d,
+                       state.t))
+    mem, _ = fast.update(mem, r, y)
+    info = mem.step_info(pb)
+    info = StepInfo(**{**vars(info), "solve_time": time.perf_counter() - t0})
+    return NMPCState(X=ca.DM(mem.X), U=ca.DM(mem.U[None, :]), u_prev=mem.u_prev, r_prev=r,
+                     z=mem.z.copy(), d=mem.d, lam=None, info=info, t=mem.t)
 
 
 def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: float,
