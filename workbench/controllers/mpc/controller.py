@@ -97,7 +97,7 @@ class NMPC:
         be the reference the loop runs on (e.g. a
         :class:`~workbench.references.Trajectory`).
     compiled_sample : bool
-        With ``jit``, modes rti and sqp, no preview and DAQP: run each update as one
+        With ``jit``, modes rti and sqp and DAQP: run each update as one
         compiled C call (:mod:`.fast`; same plans). :attr:`compiled_reason` says why
         an NMPC runs the Python update instead.
     """
