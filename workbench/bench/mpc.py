@@ -296,7 +296,8 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
         ctrls.update(old)
     rows = _baseline_rows(sc, ctrls, missing)
     head = sc["rti"]
-    alone = _alone(plant, {k: ours[k] for k in ("rti", "sqp2", "adaptive")}, nmpc, ref, duration,
+    alone = _alone(plant, {k: ours[k] for k in ("rti", "sqp2", "adaptive", "rti_nmpc")}, nmpc,
+                   ref, duration,
                    None if "plain_rti_osqp" in missing else nmpc.with_settings(jit=False))
     from .mpc_variants import variants
     var = variants(plant, ref, min(duration, 5.0), nmpc,
