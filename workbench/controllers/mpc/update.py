@@ -119,7 +119,7 @@ def compiled_sample(pb):
         if why is None:
             try:
                 fast = CompiledNMPC(c)
-            except (CompileError, MemoryError) as exc:
+            except (CompileError, MemoryError, OSError) as exc:   # OSError: loading it
                 why = str(exc)
     pb._compiled_sample = got = (fast, why)
     return got
