@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 import tempfile
 import weakref
 from pathlib import Path
@@ -35,7 +36,8 @@ import casadi as ca
 import numpy as np
 
 from ...errors import InputError
-from ...integrate.jit import CompileError, have_compiler, shared_library
+from ...integrate.jit import (CompileError, cache_dir, have_compiler, shared_library,
+                              source_digest)
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
 from .qp import apply_step, prepare, qp_solver
@@ -395,8 +397,13 @@ class CompiledNMPC:
         self.nmpc, self.sample_time = nmpc, nmpc.sample_time
         self.pb = pb = nmpc._problem
         inc, lib = _daqp_paths()
-        path, _ = shared_library(f"wb_fast_n{pb.N}", _source(pb), ((*_FLAGS, f"-I{inc}", f"-DCASADI_MAX_NUM_THREADS={_MAX_LIVE}"),),
-                                 libs=(lib,))
+        flags = (*_FLAGS, f"-I{inc}", f"-DCASADI_MAX_NUM_THREADS={_MAX_LIVE}")
+        src = _source(pb)
+        name = f"wb_fast_n{pb.N}"
+        if not (cache_dir() / f"{name}_{source_digest(src.encode(), [*flags, lib])}.so").exists():
+            print(f"NMPC: compiling its sample to C (N = {pb.N}; once, then cached in "
+                  f"{cache_dir()}) ...", file=sys.stderr, flush=True)
+        path, _ = shared_library(name, src, (flags,), libs=(lib,))
         self._lib = so = ctypes.CDLL(str(path))
         so.wb_fast_new.restype = ctypes.c_void_p
         so.wb_fast_new.argtypes = [ctypes.c_void_p]
