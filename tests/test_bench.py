@@ -144,3 +144,31 @@ def test_plain_rti_baseline_has_the_cost_weights():
         assert d[4 * k + 1] == pytest.approx(f * wv + 1e-8, rel=1e-12)
         assert d[4 * k + 2] == d[4 * k + 3] == pytest.approx(1e-8, rel=1e-12)
     assert d[0] == pytest.approx(1e-8, rel=1e-12)
+
+
+def test_bench_mpc_targets_met_judges_each_configuration():
+    # synthetic scores (no timing): a configuration meets a target only if its own
+    # figure is on the right side of it; the plain RTI missing leaves the ratio unjudged
+    from workbench.bench.mpc import TARGETS, targets_met
+
+    def row(med, p99, cost):
+        return {"median_s": med, "cpu_p99_ms": p99, "cost": cost}
+    sc = {"sqp": row(1e-4, 0.3, 100.0), "rti": row(1e-4, 0.3, 102.0),
+          "sqp2": row(1e-4, 0.3, 100.5), "adaptive": row(1e-4, 0.3, 100.05),
+          "plain_rti_osqp": row(1.2e-3, 2.0, 100.1)}
+    alone = {"rti": {"median_s": 0.9e-4, "cpu_p99_ms": 0.2, "ratio_plain_rti_osqp": 12.0},
+             "sqp2": {"median_s": 2e-4, "cpu_p99_ms": 0.2, "ratio_plain_rti_osqp": 12.0},
+             "adaptive": {"median_s": 0.9e-4, "cpu_p99_ms": 0.6, "ratio_plain_rti_osqp": 9.0}}
+    out = targets_met(sc, alone, {"friction": {"ratio": 1.2}, "lines": {"ratio": 3.5}})
+    assert out["rti"]["met"]["cost_vs_converged"] is False      # +2 % > 1 %
+    assert out["rti"]["met"]["median_s"] and out["rti"]["met"]["ratio_plain_rti_osqp"]
+    assert out["sqp2"]["met"]["median_s"] is False                # 0.2 ms > 0.15 ms
+    assert out["adaptive"]["met"]["cpu_p99_ms"] is False and not out["adaptive"]["all"]
+    assert out["adaptive"]["met"]["ratio_plain_rti_osqp"] is False   # 9x < 10x
+    assert out["adaptive"]["ratio_plain_rti_osqp_lockstep"] == pytest.approx(12.0)
+    assert out["adaptive"]["cost_vs_converged"] == pytest.approx(5e-4)
+    assert out["variants"] == {"worst_ratio": 3.5, "met": False}
+    assert TARGETS["ratio_plain_rti_osqp"] == 10.0 and TARGETS["median_s"] == 0.15e-3
+    none = targets_met(sc, {k: {**v, "ratio_plain_rti_osqp": None} for k, v in alone.items()},
+                       {})
+    assert none["rti"]["met"]["ratio_plain_rti_osqp"] is None and not none["rti"]["all"]

@@ -70,10 +70,10 @@ def _compare(rig25, ours, ref, samples: int) -> float:
         r = _reference(k)
         sa, ua = ref.update(sa, r, y)
         sf, uf = ours.update(sf, r, y)
-        worst = max(worst, float(np.max(np.abs(np.asarray(sa.X) - sf.X))),
-                    float(np.max(np.abs(np.asarray(sa.U).ravel() - sf.U))),
+        worst = max(worst, float(np.max(np.abs(np.asarray(sa.X) - np.asarray(sf.X)))),
+                    float(np.max(np.abs(np.asarray(sa.U).ravel() - np.asarray(sf.U).ravel()))),
                     abs(ua - uf), abs(sa.d - sf.d) / 100.0, abs(sa.u_prev - sf.u_prev))
-        info = ours.info(sf)
+        info = ours.info(sf) if isinstance(ours, CompiledNMPC) else sf.info
         assert info.iterations == sa.info.iterations and info.success == sa.info.success
         assert info.restarted == sa.info.restarted
         x = sim.step(x, float(np.clip(ua, 0.0, 10.0)), 0.01)[-1]
@@ -92,6 +92,16 @@ def test_compiled_sqp_gives_the_same_plans(rig25, nmpc, fast):
     # mode and iteration limit are settings of the same library (no second compile)
     sqp = nmpc.with_settings(mode="sqp", max_iterations=4)
     assert _compare(rig25, CompiledNMPC(sqp), sqp, 60) <= 1e-8
+
+
+def test_compiled_sample_follows_a_preview(rig25, nmpc):
+    # with the whole reference known (the reference _reference(k) at t = k T, its
+    # jumps and ramps previewed over the horizon) the node reference comes from Python
+    def preview(t):
+        k = np.floor(np.asarray(t, dtype=float) / 0.01 + 1e-9).astype(int)
+        return np.array([_reference(int(i)) for i in np.ravel(k)]).reshape(np.shape(t))
+    pv = nmpc.with_settings(preview=preview)
+    assert _compare(rig25, CompiledNMPC(pv), pv, 140) <= 1e-8
 
 
 def test_compiled_memory_reports_the_last_sample(rig25, fast):
@@ -114,7 +124,27 @@ def test_compiled_memory_reports_the_last_sample(rig25, fast):
 def test_compiled_step_refuses_what_it_does_not_run(nmpc):
     with pytest.raises(InputError, match="ipopt"):
         CompiledNMPC(nmpc.with_settings(mode="ipopt"))
-    with pytest.raises(InputError, match="preview"):
-        CompiledNMPC(nmpc.with_settings(preview=lambda t: 0.2 + 0 * t))
     with pytest.raises(InputError, match="DAQP"):
         CompiledNMPC(nmpc.with_settings(qp_solver="qrqp"))
+
+
+def test_nmpc_update_runs_the_compiled_sample(rig25, nmpc):
+    # NMPC itself (jit on, the default compiled_sample) runs each update as one C call
+    # and gives the plans of the Python update (jit off: CasADi's virtual machine);
+    # the memory goes through an NMPCState every sample (copied in and out)
+    on = nmpc.with_settings(jit=True)
+    assert on.compiled_reason is None
+    assert on.kind == nmpc.kind
+    assert _compare(rig25, on, nmpc, 140) <= 1e-8
+    y = {"x": 0.2, "v": 0.0, "p_a": 4e5, "p_b": 4e5}
+    s1, _ = on.update(None, 0.25, y)
+    X1 = np.asarray(s1.X).copy()
+    s2, _ = on.update(s1, 0.30, y)
+    assert np.array_equal(np.asarray(s1.X), X1)           # the state passed in is kept
+    assert s2.t == pytest.approx(0.01) and s2.r_prev == 0.30 and s2.info.success
+
+
+def test_nmpc_says_why_it_runs_in_python(nmpc):
+    assert "jit" in nmpc.compiled_reason
+    assert "compiled_sample" in nmpc.with_settings(jit=True, compiled_sample=False).compiled_reason
+    assert "ipopt" in nmpc.with_settings(jit=True, mode="ipopt").compiled_reason

@@ -96,6 +96,10 @@ class NMPC:
         chord over one sample) instead of extrapolating the current sample. It must
         be the reference the loop runs on (e.g. a
         :class:`~workbench.references.Trajectory`).
+    compiled_sample : bool
+        With ``jit``, modes rti and sqp and DAQP: run each update as one
+        compiled C call (:mod:`.fast`; same plans). :attr:`compiled_reason` says why
+        an NMPC runs the Python update instead.
     """
 
     model: Any
@@ -121,6 +125,7 @@ class NMPC:
     disturbance_gain: float = field(default=1.0, metadata=_meta("-", "force observer gain"))
     jit: bool = field(default=True, metadata=_meta("", "compile to C"))
     preview: Any = field(default=None, metadata=_meta("", "reference known in advance"))
+    compiled_sample: bool = field(default=True, metadata=_meta("", "one C call per sample"))
 
     #: Measurements read (wrap in :class:`~workbench.controllers.observer.Observed` to
     #: run on x, p_a, p_b only).
@@ -155,6 +160,12 @@ class NMPC:
     @property
     def kind(self) -> str:
         return f"NMPC ({self.mode}, N = {self.horizon})"
+
+    @property
+    def compiled_reason(self) -> str | None:
+        """None when each update is one compiled C call, else why not (builds it)."""
+        from .update import compiled_sample
+        return compiled_sample(self._problem)[1]
 
     # ------------------------------------------------------------------ protocol
     def reset(self) -> None:

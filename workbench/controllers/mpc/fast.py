@@ -1,8 +1,9 @@
 """The NMPC's whole sample as one compiled C call (modes ``rti`` and ``sqp``).
 
-:class:`CompiledNMPC` runs exactly what :func:`.update.advance` does for an NMPC
-without ``preview``: scale the measurement, extrapolate the reference to the nodes
-and project it onto the admissible stroke, shift the previous plan, update the
+:class:`CompiledNMPC` runs exactly what :func:`.update.advance` does: scale the
+measurement, extrapolate the reference to the nodes (with a ``preview``: the node
+reference made in Python by :func:`.nodes.node_reference`, ~10 us) and project it onto
+the admissible stroke, shift the previous plan, update the
 force estimate, linearise and condense, solve the QP, update the plan, fall back to
 a cold start and then to the shifted previous plan on failure. The Gauss-Newton step
 (:func:`.qp.sqp_step`: prep, DAQP, post) is generated as C by CasADi with the QP
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 import tempfile
 import weakref
 from pathlib import Path
@@ -34,8 +36,10 @@ import casadi as ca
 import numpy as np
 
 from ...errors import InputError
-from ...integrate.jit import CompileError, have_compiler, shared_library
+from ...integrate.jit import (CompileError, cache_dir, have_compiler, shared_library,
+                              source_digest)
 from .model import NMPC_STATES, V_SCALE
+from .nodes import admissible, node_reference
 from .qp import apply_step, prepare, qp_solver
 from .results import StepInfo
 
@@ -47,8 +51,9 @@ _CFG = ("sx0", "sx1", "sx2", "sx3", "L", "T", "rate_limit", "r_lo", "r_hi", "max
 
 #: compiled NMPCs of one horizon alive at once in a process (the QP's memory pool)
 _MAX_LIVE = 64
-#: C compiler flags of the step (no -ffast-math: the step tests for NaN)
-_FLAGS = tuple(os.environ.get("WB_FAST_FLAGS", "-O2").split())
+#: C compiler flags of the step (no -ffast-math: the step tests for NaN; -fno-math-errno
+#: lets sqrt be one instruction: nothing reads errno; 10 % off the interval maps)
+_FLAGS = tuple(os.environ.get("WB_FAST_FLAGS", "-O2 -fno-math-errno").split())
 
 _DRIVER = r"""
 /* ---- driver: one NMPC sample around the generated step (workbench.controllers.mpc.fast) */
@@ -199,14 +204,19 @@ static void reference(wb_fast_t *h, double r, int started, double r_prev) {
   }
 }
 
-/* one sample: memory m updated in place, command (V) in *u; returns 1 on success */
-int wb_fast_sample(wb_fast_t *h, double *m, const double *y, double r, double *u) {
+/* one sample: memory m updated in place, command (V) in *u; returns 1 on success.
+   RV: the node reference given (scaled position, then velocity, N + 1 each: the
+   preview, made by the caller) or 0 (extrapolated from r here) */
+int wb_fast_sample_ref(wb_fast_t *h, double *m, const double *y, double r, const double *RV,
+                       double *u) {
   const double *c = h->cfg; struct timespec t0, t1;
   int started = m[M_STARTED] != 0.0, warm, ok = 0, restarted = 0, it = 0, i, k, iters;
   double up, dprev, est, d;
   clock_gettime(CLOCK_MONOTONIC, &t0);
   for (i = 0; i < NX; ++i) h->zm[i] = y[i] / c[C_sx0 + i];
-  reference(h, r, started, m[M_RPREV]);
+  if (RV) {
+    memcpy(h->R, RV, sizeof(double) * (NN + 1)); memcpy(h->VR, RV + NN + 1, sizeof(double) * (NN + 1));
+  } else reference(h, r, started, m[M_RPREV]);
   if (started) {
     up = m[M_UPREV]; dprev = m[M_D]; est = 1.0;
     for (i = 0; i < NX; ++i) h->zp[i] = m[M_Z + i];
@@ -246,6 +256,10 @@ int wb_fast_sample(wb_fast_t *h, double *m, const double *y, double r, double *u
   for (i = 0; i < 3; ++i) { m[M_TPHASE + i] = h->tphase[i]; h->tphase[i] = 0.0; }
   m[M_TPHASE + 3] += 1.0;
   return ok;
+}
+
+int wb_fast_sample(wb_fast_t *h, double *m, const double *y, double r, double *u) {
+  return wb_fast_sample_ref(h, m, y, r, 0, u);
 }
 """
 
@@ -353,7 +367,7 @@ class CompiledMemory:
 
 
 class CompiledNMPC:
-    """An :class:`~.controller.NMPC` (mode rti or sqp, no preview) whose every sample
+    """An :class:`~.controller.NMPC` (mode rti or sqp) whose every sample
     is one compiled C call; same plans as the NMPC itself (see the module text).
 
     Parameters
@@ -364,7 +378,7 @@ class CompiledNMPC:
     Raises
     ------
     InputError
-        Mode ipopt, a preview, or a QP solver other than DAQP (the only one whose C
+        Mode ipopt, or a QP solver other than DAQP (the only one whose C
         library is linked into the step).
     workbench.integrate.jit.CompileError
         No C compiler, or CasADi without DAQP's C library (:func:`compiled_unavailable`).
@@ -375,9 +389,6 @@ class CompiledNMPC:
     def __init__(self, nmpc) -> None:
         if nmpc.mode not in ("rti", "sqp"):
             raise InputError(f"the compiled NMPC step runs modes rti and sqp, not {nmpc.mode!r}")
-        if nmpc.preview is not None:
-            raise InputError("the compiled NMPC step has no preview (the reference is "
-                             "extrapolated in C); use NMPC for a previewed reference")
         if nmpc.qp_solver != "daqp":
             raise InputError(f"the compiled NMPC step links DAQP; qp_solver is {nmpc.qp_solver!r}")
         why = compiled_unavailable()
@@ -386,8 +397,13 @@ class CompiledNMPC:
         self.nmpc, self.sample_time = nmpc, nmpc.sample_time
         self.pb = pb = nmpc._problem
         inc, lib = _daqp_paths()
-        path, _ = shared_library(f"wb_fast_n{pb.N}", _source(pb), ((*_FLAGS, f"-I{inc}", f"-DCASADI_MAX_NUM_THREADS={_MAX_LIVE}"),),
-                                 libs=(lib,))
+        flags = (*_FLAGS, f"-I{inc}", f"-DCASADI_MAX_NUM_THREADS={_MAX_LIVE}")
+        src = _source(pb)
+        name = f"wb_fast_n{pb.N}"
+        if not (cache_dir() / f"{name}_{source_digest(src.encode(), [*flags, lib])}.so").exists():
+            print(f"NMPC: compiling its sample to C (N = {pb.N}; once, then cached in "
+                  f"{cache_dir()}) ...", file=sys.stderr, flush=True)
+        path, _ = shared_library(name, src, (flags,), libs=(lib,))
         self._lib = so = ctypes.CDLL(str(path))
         so.wb_fast_new.restype = ctypes.c_void_p
         so.wb_fast_new.argtypes = [ctypes.c_void_p]
@@ -395,6 +411,9 @@ class CompiledNMPC:
         so.wb_fast_sample.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
                                       ctypes.c_double, ctypes.c_void_p]
         so.wb_fast_sample.restype = ctypes.c_int
+        so.wb_fast_sample_ref.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                                          ctypes.c_double, ctypes.c_void_p, ctypes.c_void_p]
+        so.wb_fast_sample_ref.restype = ctypes.c_int
         self._msize = int(so.wb_fast_memory_size())
         c = nmpc
         vals = {"sx0": pb.sx[0], "sx1": pb.sx[1], "sx2": pb.sx[2], "sx3": pb.sx[3], "L": pb.L,
@@ -414,10 +433,28 @@ class CompiledNMPC:
         self._u = np.zeros(1)
         self._yp, self._up = self._y.ctypes.data, self._u.ctypes.data
         self._call = so.wb_fast_sample
+        self._call_ref = so.wb_fast_sample_ref
+        self._rv = np.zeros(2 * (pb.N + 1))
 
     @property
     def kind(self) -> str:
         return f"NMPC ({self.nmpc.mode}, N = {self.nmpc.horizon}, compiled sample)"
+
+    def memory(self, plan=None) -> CompiledMemory:
+        """A fresh memory: before the first sample (``plan`` None), or holding ``plan``
+        = (X (4, N + 1), U (1, N), u_prev, r_prev, z (4,), d, t) of an
+        :class:`~.results.NMPCState` (scaled as there; r_prev m, d N, t s)."""
+        mem = CompiledMemory(self.pb.N, self._msize)
+        if plan is not None:
+            X, U, u_prev, r_prev, z, d, t = plan
+            n, b = 4 * (self.pb.N + 1), mem.buf
+            b[:n] = np.asarray(X, dtype=float).ravel(order="F")
+            b[n:n + self.pb.N] = np.asarray(U, dtype=float).ravel()
+            b[mem._at("u_prev")], b[mem._at("r_prev")] = u_prev, r_prev
+            b[mem._at("z"):mem._at("z") + 4] = z
+            b[mem._at("d")], b[mem._at("t")] = d, t
+            b[mem._at("t") + 1] = 1.0                  # started
+        return mem
 
     def reset(self) -> None:
         """No memory before the first sample (it starts from rest at the measured state)."""
@@ -436,8 +473,21 @@ class CompiledNMPC:
             yy[0], yy[1], yy[2], yy[3] = y["x"], y["v"], y["p_a"], y["p_b"]
         except KeyError as exc:
             raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
-        self._call(self._h, state.ptr, self._yp, r, self._up)
+        if self.nmpc.preview is None:
+            self._call(self._h, state.ptr, self._yp, r, self._up)
+        else:
+            self._node_reference(state, r)
+            self._call_ref(self._h, state.ptr, self._yp, r, self._rv.ctypes.data, self._up)
         return state, self._u[0]
+
+    def _node_reference(self, state: CompiledMemory, r: float) -> None:
+        """The previewed node reference (scaled) into the buffer the C sample reads."""
+        pb, N = self.pb, self.pb.N
+        started = state.buf[state._at("t") + 1] != 0.0
+        t = state.t + pb.T if started else 0.0
+        R, VR = admissible(pb, *node_reference(pb, r, state.r_prev if started else None, t))
+        self._rv[:N + 1] = R / pb.L
+        self._rv[N + 1:] = VR / V_SCALE
 
     def info(self, state: CompiledMemory) -> StepInfo:
         """The last update's report (:class:`~.results.StepInfo`)."""

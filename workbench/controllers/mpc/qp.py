@@ -28,7 +28,7 @@ import numpy as np
 __all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver"]
 
 
-def sqp_step(pb, jit: bool | None = None) -> ca.Function:
+def sqp_step(pb, jit: bool | None = None) -> "ca.Function | _LazyStep":
     """One Gauss-Newton SQP step as a single call: prep (C), QP, post (C).
 
     Parameters
@@ -43,7 +43,9 @@ def sqp_step(pb, jit: bool | None = None) -> ca.Function:
 
     Returns
     -------
-    casadi.Function
+    casadi.Function or _LazyStep
+        (compiled: built at its first call, so that an NMPC whose updates run as one
+        compiled C call, :mod:`.fast`, never compiles it)
         ``wb_nmpc_step(Xp, Up, shift, x0, R, VR, up, zprev, dprev, est, P) -> (X, U,
         u0, viol, ok, step, d)``: the previous plan (shifted by one sample if
         ``shift``), the measured state, the reference position and velocity at the
@@ -53,10 +55,27 @@ def sqp_step(pb, jit: bool | None = None) -> ca.Function:
         violations (scaled, per state), success, the largest command step, the force
         estimate used.
     """
-    prep, post = prepare(pb), apply_step(pb)
     if pb.c.jit if jit is None else jit:
-        from ...integrate.jit import compiled
-        prep, post = compiled(prep), compiled(post)
+        return _LazyStep(pb)
+    return _step(pb, prepare(pb), apply_step(pb))
+
+
+class _LazyStep:
+    """:func:`sqp_step` with prep and post compiled to C at the first call."""
+
+    def __init__(self, pb) -> None:
+        self._pb, self._f = pb, None
+
+    def __call__(self, *args):
+        if self._f is None:
+            from ...integrate.jit import compiled
+            self._f = _step(self._pb, compiled(prepare(self._pb)),
+                            compiled(apply_step(self._pb)))
+        return self._f(*args)
+
+
+def _step(pb, prep: ca.Function, post: ca.Function) -> ca.Function:
+    """prep, the QP, post as one function (see :func:`sqp_step`)."""
     qp = qp_solver(pb.c.qp_solver, pb.N + pb.ns, 2 * pb.N * len(pb.soft))
     ins = [ca.MX.sym(prep.name_in(i), prep.sparsity_in(i)) for i in range(prep.n_in())]
     o = prep(*ins)
@@ -91,32 +110,36 @@ def prepare(pb) -> ca.Function:
                        [*out, X, U, d])
 
 
-def condense(pb) -> ca.Function:
-    """Condensed Gauss-Newton QP from interval sensitivities (SX, scalar code).
+def condense(pb, Sym=ca.MX) -> ca.Function:
+    """Condensed Gauss-Newton QP from interval sensitivities.
+
+    ``Sym`` MX (default): a compact loop of block products in the generated C (120 kB
+    at N = 20, compiled in 2-3 s; 15 us per call); SX: straight-line scalar code
+    (0.7 MB, 30 s to compile, 6 us per call, but slower from cold caches).
 
     Returns ``wb_nmpc_condense(A, B, c, dz0, X, U, R, VR, up, P) -> (H, g, A, lba, uba,
     lbx, ubx, h, G)``: the QP in the moves and slacks, and the node corrections at
     zero moves h (nx, N + 1) with their sensitivity G (nx (N + 1), N) to the moves.
     """
     N, nx, ns = pb.N, pb.nx, pb.ns
-    A_ = ca.SX.sym("A", nx, nx * N)
-    B_ = ca.SX.sym("B", nx, N)
-    c = ca.SX.sym("c", nx, N)                          # shooting defects
-    dz0 = ca.SX.sym("dz0", nx)                         # measured - guessed x_0
-    X = ca.SX.sym("X", nx, N + 1)
-    U = ca.SX.sym("U", 1, N)
-    R = ca.SX.sym("R", 1, N + 1)
-    VR = ca.SX.sym("VR", 1, N + 1)
-    up = ca.SX.sym("up")
-    P = ca.SX.sym("P", pb.P.size)
+    A_ = Sym.sym("A", nx, nx * N)
+    B_ = Sym.sym("B", nx, N)
+    c = Sym.sym("c", nx, N)                          # shooting defects
+    dz0 = Sym.sym("dz0", nx)                         # measured - guessed x_0
+    X = Sym.sym("X", nx, N + 1)
+    U = Sym.sym("U", 1, N)
+    R = Sym.sym("R", 1, N + 1)
+    VR = Sym.sym("VR", 1, N + 1)
+    up = Sym.sym("up")
+    P = Sym.sym("P", pb.P.size)
     wx, wv, wdu, rho1, rho2, lo, hi = pb.unpack(P)
     # dz_k = h_k + G_k dw, G_k with k non-zero columns
-    hs, Gs = [dz0], [ca.SX(nx, 0)]
+    hs, Gs = [dz0], [Sym(nx, 0)]
     for k in range(N):
         A = A_[:, k * nx:(k + 1) * nx]
         Gs.append(ca.horzcat(ca.mtimes(A, Gs[-1]), B_[:, k]))
         hs.append(ca.mtimes(A, hs[-1]) + c[:, k])
-    Gf = [ca.horzcat(G, ca.SX(nx, N - G.shape[1])) for G in Gs]
+    Gf = [ca.horzcat(G, Sym(nx, N - G.shape[1])) for G in Gs]
     Hh = ca.horzcat(*hs)
     Xp = X + Hh                                        # states at dw = 0
     S = [ca.vertcat(*[Gf[k][i, :] for k in range(1, N + 1)]) for i in range(nx)]
@@ -131,8 +154,8 @@ def condense(pb) -> ca.Function:
           + wdu * ca.DM(D.T @ D))
     gc = (ca.mtimes(S[0].T, wx * ex) + ca.mtimes(S[1].T, wv * ev)
           + wdu * ca.mtimes(ca.DM(D.T), ca.mtimes(ca.DM(D), U.T) - ca.DM(e0) * up))
-    H = ca.diagcat(Hc, rho2 * ca.SX.eye(ns))
-    g = ca.vertcat(gc, rho1 * ca.SX.ones(ns))
+    H = ca.diagcat(Hc, rho2 * Sym.eye(ns))
+    g = ca.vertcat(gc, rho1 * Sym.ones(ns))
     one = ca.DM.ones(N, 1)
     rows, lb, ub = [], [], []
     for i, j in pb.soft:

@@ -42,8 +42,9 @@ class NMPCState:
 
     Attributes
     ----------
-    X : casadi.DM (4, N + 1), predicted states, scaled (x/L, v/(1 m/s), p/p_supply).
-    U : casadi.DM (1, N), planned commands, scaled ((u - centre)/span).
+    X : casadi.DM (4, N + 1), predicted states, scaled (x/L, v/(1 m/s), p/p_supply)
+        (a numpy array after a compiled sample, :mod:`.fast`).
+    U : casadi.DM (1, N), planned commands, scaled ((u - centre)/span) (ditto).
     u_prev : scaled command applied last. r_prev : m, reference at the last sample.
     z : (4,) measured state at the last sample, scaled.
     d : N, estimated disturbance force (along -x, like ``load.external_force``).

@@ -12,6 +12,10 @@ Per mode (see :mod:`workbench.controllers.mpc`):
     solution.
 
 If the solver fails the previous plan is applied, shifted.
+
+With the NMPC's ``compiled_sample`` on (and ``jit``), modes rti and sqp run the
+whole sample as one C call (:class:`.fast.CompiledNMPC`: the same
+plans, bit for bit on the tests); :func:`compiled_sample` says why not otherwise.
 """
 
 from __future__ import annotations
@@ -23,10 +27,11 @@ import casadi as ca
 import numpy as np
 
 from ...errors import InputError
-from .model import NMPC_STATES, V_SCALE, horizon_reference
+from .model import NMPC_STATES, V_SCALE
+from .nodes import admissible, node_reference
 from .results import NMPCState, Solution, StepInfo
 
-__all__ = ["advance", "solution"]
+__all__ = ["advance", "solution", "compiled_sample", "node_reference", "admissible"]
 
 
 @dataclass(frozen=True)
@@ -45,42 +50,6 @@ class _Sample:
     z_prev: np.ndarray
 
 
-def node_reference(pb, r: float, r_prev: float | None, t: float) -> tuple[np.ndarray, np.ndarray]:
-    """Reference position (m) and velocity (m/s) at the N + 1 shooting nodes.
-
-    With the controller's ``preview`` (the whole reference r(t), s -> m) the nodes
-    take it at t + k T and its velocity from the chord over one sample centred on
-    each node (bounded by ``max_speed``); else :func:`horizon_reference` extrapolates
-    the current sample (a ramp) or holds it (a step).
-    """
-    c = pb.c
-    if c.preview is None:
-        R, rate = horizon_reference(r, r_prev, pb.T, pb.N, c.reference_rate_limit)
-        return np.asarray(R, dtype=float), np.full(pb.N + 1, rate)
-    tk = t + pb.T * np.arange(pb.N + 1)
-    R = np.asarray(c.preview(tk), dtype=float)
-    h = 0.5 * pb.T
-    VR = (np.asarray(c.preview(tk + h), dtype=float) - np.asarray(c.preview(tk - h), dtype=float)) / pb.T
-    vmax = c.max_speed if c.max_speed is not None else np.inf
-    return R, np.clip(VR, -vmax, vmax)
-
-
-def admissible(pb, R: np.ndarray, VR: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The node reference projected onto the stroke the NMPC may use (m, m/s).
-
-    A reference beyond ``stroke_margin`` cannot be reached: tracking it makes the
-    stroke limit's exact (L1) penalty active, and the optimum sits on the kink where
-    the tracking cost's pull balances the penalty's multiplier. Any model error (the
-    lines' delay) then moves the plan from one side of the kink to the other every
-    sample: the command chattered by +-0.5 V and p_b by +-1 bar at the margin. The
-    projected reference is reachable, the constraint inactive, the cost smooth there;
-    where it is clipped its velocity is zero.
-    """
-    lo, hi = pb.c.stroke_margin, pb.L - pb.c.stroke_margin
-    clipped = (R < lo) | (R > hi)
-    return np.clip(R, lo, hi), np.where(clipped, 0.0, VR)
-
-
 def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     """One controller update: the new memory (its U[0] is the command).
 
@@ -93,6 +62,9 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     """
     t0 = time.perf_counter()
     c = pb.c
+    fast = compiled_sample(pb)[0]
+    if fast is not None:
+        return _advance_compiled(pb, fast, y, r, state, t0)
     try:
         zm = np.array([y[k] for k in NMPC_STATES], dtype=float) / pb.sx
     except KeyError as exc:
@@ -119,6 +91,53 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     w0 = float(U[0])
     info = _step_info(pb, it, ok, viol, restarted, time.perf_counter() - t0)
     return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info, t=t)
+
+
+def compiled_sample(pb):
+    """(the compiled sample of the problem's NMPC, None) or (None, why not); built at
+    the first call and kept on the problem. Off: the setting ``compiled_sample`` or
+    ``jit`` off, mode ipopt, a QP solver other than DAQP, no C compiler,
+    no DAQP library, or too many compiled NMPCs alive."""
+    got = getattr(pb, "_compiled_sample", None)
+    if got is not None:
+        return got
+    c = pb.c
+    why = None
+    if not getattr(c, "compiled_sample", False):
+        why = "compiled_sample is off"
+    elif not c.jit:
+        why = "jit is off"
+    elif c.mode not in ("rti", "sqp"):
+        why = f"mode {c.mode} runs in Python"
+    elif c.qp_solver != "daqp":
+        why = f"the compiled sample links DAQP, not {c.qp_solver}"
+    fast = None
+    if why is None:
+        from ...integrate.jit import CompileError
+        from .fast import CompiledNMPC, compiled_unavailable
+        why = compiled_unavailable()
+        if why is None:
+            try:
+                fast = CompiledNMPC(c)
+            except (CompileError, MemoryError, OSError) as exc:   # OSError: loading it
+                why = str(exc)
+    pb._compiled_sample = got = (fast, why)
+    return got
+
+
+def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
+                      t0: float) -> NMPCState:
+    """:func:`advance` as one compiled C call: the memory copied into a fresh buffer
+    (the state passed in is not changed), the new state read out of it (its X, U
+    numpy arrays: a casadi.DM each would cost 30 us a sample)."""
+    mem = fast.memory(None if state is None else
+                      (state.X, state.U, state.u_prev, state.r_prev, state.z, state.d,
+                       state.t))
+    mem, _ = fast.update(mem, r, y)
+    info = mem.step_info(pb)
+    info = StepInfo(**{**vars(info), "solve_time": time.perf_counter() - t0})
+    return NMPCState(X=mem.X.copy(), U=mem.U[None, :].copy(), u_prev=mem.u_prev, r_prev=r,
+                     z=mem.z.copy(), d=mem.d, lam=None, info=info, t=mem.t)
 
 
 def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: float,
@@ -188,8 +207,8 @@ def _previous_plan(pb, state: NMPCState | None, zm: np.ndarray):
     """After a failed solve: the previous plan shifted by one sample (or rest)."""
     if state is None:
         return _cold(pb, zm)
-    return (ca.horzcat(state.X[:, 1:], state.X[:, -1]),
-            ca.horzcat(state.U[:, 1:], state.U[:, -1]))
+    X, U = ca.DM(state.X), ca.DM(state.U)            # numpy after a compiled sample
+    return ca.horzcat(X[:, 1:], X[:, -1]), ca.horzcat(U[:, 1:], U[:, -1])
 
 
 def _step_info(pb, it: int, ok: bool, viol, restarted: bool, solve_time: float) -> StepInfo:
