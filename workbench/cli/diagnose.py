@@ -64,7 +64,8 @@ def _diagnose(args: argparse.Namespace) -> int:
     check_output_dir(args.out)            # refused before minutes of work, not after
     verbose = not args.quiet and not args.json
     if verbose:
-        print(f"diagnosing {args.recording} on {args.plant} ...", file=sys.stderr, flush=True)
+        print(f"diagnosing {', '.join(args.recording)} on {args.plant} ...", file=sys.stderr,
+              flush=True)
     from ..params import PlantParams
     from .recording_args import load_from_args
     params = PlantParams.from_toml(args.plant)
