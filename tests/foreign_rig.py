@@ -16,7 +16,11 @@ on sharing its simulator's discretisation):
 - lines: ``LINE_NODES`` lumped pi-segments per line (half a segment's volume at each
   end, the valve-end half as its own node, the chamber-end half added to the
   chamber); node capacitance adiabatic, resistance Hagen-Poiseuille + Blasius,
-  inertance L/(N A) (the workbench uses a different segment count and layout);
+  inertance L/(N A) (the workbench uses a different segment count and layout:
+  a full segment's volume at each segment's valve end, none at the chamber). Or
+  (``line_model="lumped"``) a second, coarser model: one lumped pi section, half the
+  line's volume at the valve port and half added to the chamber, joined by the whole
+  line's inertance L/A and its laminar (Hagen-Poiseuille) resistance only;
 - leakage: ISO 6358 gap to atmosphere (b = 0.528, the nozzle ratio of physics.md)
   per chamber and a laminar cross-piston leak c (p_a - p_b);
 - supply droop: reservoir of volume V_r fed through an ISO 6358 regulator
@@ -82,7 +86,7 @@ class ForeignRig:
     """The rig's state equations; ``P`` is the flat dict of :func:`load_plant`."""
 
     def __init__(self, P: dict, coulomb=0.0, static=0.0, stribeck=0.01, v_eps=2e-3,
-                 law="smooth", sigma0=None, sigma1=None):
+                 law="smooth", sigma0=None, sigma1=None, line_model="pi5"):
         self.P = P
         self.k, self.patm, self.T = (P["gas.polytropic_index"], P["gas.atmospheric_pressure"],
                                      P["gas.temperature"])
@@ -93,13 +97,17 @@ class ForeignRig:
         self.spool = "valve.bandwidth" in P
         self.droop = "supply.reservoir_volume" in P
         self.lines = "lines.length" in P
+        if line_model not in ("pi5", "lumped"):
+            raise ValueError(f"line_model {line_model!r}: 'pi5' or 'lumped'")
+        self.nodes = LINE_NODES if line_model == "pi5" else 1
+        self.blasius = line_model == "pi5"
         idx = 4
         self.i_spool = idx
         idx += 2 if self.spool else 0
         self.i_mass = idx
         idx += 2 if self.heat is not None else 0
         self.i_line = idx
-        idx += 4 * LINE_NODES if self.lines else 0
+        idx += 4 * self.nodes if self.lines else 0
         self.i_ps = idx
         idx += 1 if self.droop else 0
         self.lugre = law == "lugre" and bool(coulomb)
@@ -112,7 +120,7 @@ class ForeignRig:
         if self.lines:
             d = P["lines.diameter"]
             self.a_line = math.pi / 4 * d * d
-            self.seg = P["lines.length"] / LINE_NODES
+            self.seg = P["lines.length"] / self.nodes
             self.v_node = self.a_line * self.seg      # interior node: two half segments
 
     def opening(self, u_spool):
@@ -134,8 +142,8 @@ class ForeignRig:
             z[self.i_mass + 1] = p_b * self.vol_b(x0) / (R_AIR * self.T)
         if self.lines:
             j = self.i_line
-            z[j:j + LINE_NODES] = p_a
-            z[j + 2 * LINE_NODES:j + 3 * LINE_NODES] = p_b
+            z[j:j + self.nodes] = p_a
+            z[j + 2 * self.nodes:j + 3 * self.nodes] = p_b
         if self.droop:
             z[self.i_ps] = self.P["supply.pressure"]
         return z
@@ -162,7 +170,7 @@ class ForeignRig:
 
     def line(self, z, j, q_valve, p_end, dz):
         """Rates of one line (nodes j..j+N-1, flows j+N..j+2N-1); returns the chamber inflow."""
-        N, T = LINE_NODES, self.T
+        N, T = self.nodes, self.T
         seg, area = self.seg, self.a_line
         d = self.P["lines.diameter"]
         for i in range(N):
@@ -176,7 +184,7 @@ class ForeignRig:
             re = max(rho * abs(vel) * d / MU_AIR, 1.0)
             # Hagen-Poiseuille 32 mu v / d^2 plus Blasius 0.316 Re^-0.25 / d * rho v|v| / 2
             drop = (32.0 * MU_AIR * vel / (d * d)
-                    + 0.158 * re ** -0.25 * rho * vel * abs(vel) / d) * seg
+                    + self.blasius * 0.158 * re ** -0.25 * rho * vel * abs(vel) / d) * seg
             dz[j + N + i] = area / seg * (p_i - p_next - drop)
         return z[j + 2 * N - 1]
 
@@ -200,7 +208,7 @@ class ForeignRig:
         else:
             ta = tb = T
         j = self.i_line
-        na, nb = (z[j], z[j + 2 * LINE_NODES]) if self.lines else (pa, pb)
+        na, nb = (z[j], z[j + 2 * self.nodes]) if self.lines else (pa, pb)
         tna, tnb = (T, T) if self.lines else (ta, tb)
         C, b = P["valve.sonic_conductance"], P["valve.critical_pressure_ratio"]
         sa, sb = o_in * iso_flow(C, b, ps, na, T), o_out * iso_flow(C, b, ps, nb, T)
@@ -208,7 +216,7 @@ class ForeignRig:
         qb = sb - o_in * iso_flow(C, b, nb, self.patm, tnb)
         if self.lines:
             qa = self.line(z, j, qa, pa, dz)
-            qb = self.line(z, j + 2 * LINE_NODES, qb, pb, dz)
+            qb = self.line(z, j + 2 * self.nodes, qb, pb, dz)
         if self.droop:
             q_reg = iso_flow(P["supply.regulator_conductance"], B_NOZZLE, P["supply.pressure"],
                              ps, T)
@@ -253,7 +261,7 @@ class ForeignRig:
 
 
 def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=None,
-             p0=(4.4e5, 4.4e5), rtol=1e-6):
+             p0=(4.4e5, 4.4e5), rtol=1e-6, line_model="pi5"):
     """Closed-loop PD run of the foreign rig, sampled at 1 kHz.
 
     Parameters
@@ -264,6 +272,8 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
     friction : dict(coulomb, static, stribeck[, v_eps]) of the smooth dry-friction law, or
         with ``law="lugre"`` (and optionally sigma0 N/m, sigma1 N s/m) the LuGre model.
     p0 : chamber pressures at rest at the start, Pa. rtol : LSODA's relative tolerance.
+    line_model : "pi5" (5 pi-segments, laminar + Blasius) or "lumped" (one pi section,
+        laminar), see the module docstring.
 
     Returns
     -------
@@ -272,7 +282,7 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
     and the noise generator (position noise drawn, the pressures' still to draw).
     """
     P = load_plant(plant_file, overrides)
-    rig = ForeignRig(P, **(friction or {}))
+    rig = ForeignRig(P, **(friction or {}), line_model=line_model)
     dt, Ts = 1e-3, P["controller.sample_time"]
     ratio = int(round(Ts / dt))
     rng = np.random.default_rng(seed)
@@ -291,9 +301,10 @@ def simulate(plant_file, reference, duration, seed=0, overrides=None, friction=N
     if rig.heat is not None:
         atol[rig.i_mass:rig.i_mass + 2] = 1e-12
     if rig.lines:
-        atol[rig.i_line:rig.i_line + 4 * LINE_NODES] = 1e-2
-        for s in (LINE_NODES, 3 * LINE_NODES):
-            atol[rig.i_line + s:rig.i_line + s + LINE_NODES] = 1e-9
+        nn = rig.nodes
+        atol[rig.i_line:rig.i_line + 4 * nn] = 1e-2
+        for s in (nn, 3 * nn):
+            atol[rig.i_line + s:rig.i_line + s + nn] = 1e-9
     e_prev = None
     for i0 in range(0, n, ratio):
         x_meas = round((z[0] + nx[i0]) / lsb_x) * lsb_x

@@ -23,7 +23,11 @@ DESCRIPTION = (
     "DIR/plant.augmented.toml, DIR/report.html (+ report.pdf) and DIR/details.json "
     "(every candidate's evidence), all or nothing. A replay that fails (non-finite, "
     "piston beyond the stroke) or fits worse than a constant, with no candidate to "
-    "explain it, is an error with its cause (exit 2), never 'no finding'.")
+    "explain it, is an error with its cause (exit 2), never 'no finding'. Several "
+    "recordings of the same rig are diagnosed together (one set of findings, the fit per "
+    "recording); a recording with one chamber pressure uses it (the other is estimated "
+    "from the force balance); a recorded supply pressure p_s that sags under flow is "
+    "used sample by sample.")
 
 
 def register(subparsers) -> None:
@@ -60,7 +64,8 @@ def _diagnose(args: argparse.Namespace) -> int:
     check_output_dir(args.out)            # refused before minutes of work, not after
     verbose = not args.quiet and not args.json
     if verbose:
-        print(f"diagnosing {args.recording} on {args.plant} ...", file=sys.stderr, flush=True)
+        print(f"diagnosing {', '.join(args.recording)} on {args.plant} ...", file=sys.stderr,
+              flush=True)
     from ..params import PlantParams
     from .recording_args import load_from_args
     params = PlantParams.from_toml(args.plant)

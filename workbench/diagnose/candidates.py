@@ -226,7 +226,7 @@ def _air_path(sc: _Scales) -> list[Candidate]:
             (Free("lines.length", 0.05, 30.0, 1.0), Free("lines.diameter", 1.5e-3, 15e-3, 4e-3)),
             fixed={"lines.segments": LINE_SEGMENTS},
             grid={"lines.length": [0.7, 2.0, 5.0], "lines.diameter": [3e-3, 5e-3]},
-            needs_pressures=True,
+            needs_pressures=False,     # its volume and delay show in the position too
             describe="valve-chamber lines: extra volume, transport delay, pressure drop"),
         # leak conductances scaled with the valve: 1e-4 .. 0.03 of one valve edge
         Candidate(

@@ -6,7 +6,11 @@ Method
    with the plant file's controller (CVODES, as ``workbench simulate``) when the
    recording has ``r`` and the controller reproduces the recorded command, else open
    loop on ``u`` re-anchored on the measured state every 0.5 s. The fit per signal is
-   ``fit_before``.
+   ``fit_before``. Rig recordings: one chamber pressure is fitted and anchored, the
+   other estimated by the force balance (:func:`.data.other_side`); a recorded ``p_s``
+   that sags is the supply sample by sample (the replay then runs on the engine);
+   several recordings are joined (:func:`.data.prepare_many`), replayed one by one,
+   with their fits reported per recording.
 2. **Locate** (:mod:`.locate`, :mod:`.witness`): short-horizon predictions (0.2 s,
    open loop on the recorded command from the measured state, :mod:`.predict`) give a
    per-sample error that does not drift; its intervals above the noise and its share
@@ -391,7 +395,8 @@ def diagnose(plant: str | os.PathLike | Plant,
         polished = _polish_findings(prep, params, chosen.ranked, by_name, nom.err)
         clock.tick("grey-box polish")
     # 5. model and refit: the augmented plant replayed like the nominal one
-    findings, aug, sim_after = _findings(prep, params, chosen.ranked, ranking, by_name, nom)
+    kept = [r for r in chosen.ranked if not _at_nominal(r, params)]
+    findings, aug, sim_after = _findings(prep, params, kept, ranking, by_name, nom)
     witness_after: dict[str, np.ndarray] = {}
     if findings and prep.has_pressures:
         witness_after = _witness_after(prep, nom.wit, aug, jit)
@@ -620,6 +625,14 @@ def _witness_after(prep: Prepared, wit: Witness, aug: PlantParams, jit: bool
         fr = {k: aug[f"friction.{k}"] for k in ("coulomb", "static", "stribeck_velocity")}
         p_obs = aug.without_effect("dry_friction")
     return wit.in_units(wit.residuals(_observer_rates(prep, p_obs, jit), fr))
+
+
+def _at_nominal(r: Ranked, params: PlantParams) -> bool:
+    """A nominal-value correction whose (polished) values are the nominal ones within
+    0.5 %: not a finding (a set may carry it along; it changes nothing)."""
+    return r.result.effect == "parameter_error" and all(
+        k in params and abs(float(v) - float(params[k])) <= 5e-3 * abs(float(params[k]))
+        for k, v in r.result.plant_values.items())
 
 
 def _no_finding_note(ranking: Sequence[Ranked]) -> list[str]:

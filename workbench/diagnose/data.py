@@ -306,10 +306,11 @@ def _pressure_notes(sides: tuple[str, ...]) -> list[str]:
     """What a recording without one or both chamber pressures allows, in words."""
     out: list[str] = []
     if not sides:
-        out.append("the recording has neither p_a nor p_b: the diagnosis is reduced to "
-                   "what the position shows (dry friction, valve deadband and offset, mass "
-                   "and viscous friction); leakage, lines, supply droop and heat transfer "
-                   "cannot be told apart from position alone")
+        out.append("the recording has no chamber pressures (neither p_a nor p_b): the "
+                   "diagnosis is reduced to what the position shows (dry friction, valve "
+                   "deadband, offset and dynamics, lines, mass and viscous friction); "
+                   "leakage, supply droop and heat transfer cannot be told apart from "
+                   "position alone")
     elif len(sides) == 1:
         other = "p_b" if sides == ("p_a",) else "p_a"
         out.append(f"the recording has {sides[0]} but no {other}: the predictions are "

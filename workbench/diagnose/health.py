@@ -188,6 +188,21 @@ def _check(prep: Prepared, sim: Mapping[str, np.ndarray]) -> ReplayCheck:
                         prep.plant.stroke, prep.signals)
 
 
+#: What the model form of a finding cannot reach, said when a signal stays unexplained
+#: with that finding (the limit, not a missing effect).
+MODEL_FORM = {
+    "line_dynamics": (
+        "the line model is the workbench's lumped chain of 3 segments, each segment's "
+        "volume at its valve end: it cannot reproduce a distributed line's wave shape, "
+        "and its fitted length and diameter are the chain's, not the tube's (by a linear "
+        "analysis of this layout, up to 15 % shorter than a distributed line)"),
+    "dry_friction": (
+        "the friction law is Karnopp stick-slip with a Stribeck curve: it has no "
+        "pre-sliding displacement and no frictional lag (LuGre-type behaviour at "
+        "velocity reversals and at break-away is beyond it)"),
+}
+
+
 def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[str],
             sim_after: Mapping[str, np.ndarray], masks: Mapping[str, np.ndarray],
             no_finding: Sequence[str] = ()
@@ -241,4 +256,7 @@ def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[s
         sim, label = sim_after, "the augmented model"
     remaining, still = unexplained({s: prep.measured(s) for s in prep.signals}, sim,
                                    prep.noise, masks, prep.signals, label)
+    if still:
+        still += [f"model-form limit of {f}: {MODEL_FORM[f]}" for f in dict.fromkeys(findings)
+                  if f in MODEL_FORM]
     return remaining, still, notes
