@@ -165,7 +165,7 @@ class NMPC:
         """(new state, command in V) from the reference (m) and measured x, v, p_a, p_b (SI)."""
         pb = self._problem
         new = advance(pb, y, float(r), state)
-        return new, pb.u_c + pb.u_s * new.u_prev
+        return new, pb.command(new.u_prev)
 
     def solve(self, y: dict | Sequence[float], r: float, state: NMPCState | None = None) -> Solution:
         """Solve one problem from the measured state ``y`` (x m, v m/s, p_a, p_b Pa).

@@ -437,6 +437,8 @@ class CompiledNMPC:
         except KeyError as exc:
             raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
         self._call(self._h, state.ptr, self._yp, r, self._up)
+        if self.pb.valve is not None:                  # planned in the compensated command
+            return state, self.pb.valve(self._u[0])
         return state, self._u[0]
 
     def info(self, state: CompiledMemory) -> StepInfo:
