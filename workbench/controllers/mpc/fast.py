@@ -270,7 +270,7 @@ def _daqp_paths() -> tuple[str, str] | None:
 
 def _source(pb) -> str:
     """The generated step (prep, DAQP, post) followed by the driver."""
-    nz, nc = pb.N + pb.ns, 2 * pb.N * len(pb.soft)
+    nz, nc = pb.N + pb.ns, pb.n_rows
     funs = (prepare(pb), qp_solver("daqp", nz, nc), apply_step(pb))
     _check_layout(*funs)
     with tempfile.TemporaryDirectory(prefix="wb_fast_") as tmp:

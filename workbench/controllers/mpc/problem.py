@@ -12,7 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .model import V_SCALE, interval_maps, planning_model
+from .model import V_SCALE, interior_map, interval_maps, planning_model
 from .nlp import IpoptSolver
 from .qp import sqp_step
 
@@ -38,6 +38,9 @@ class Problem:
         and null offset); valve : its DeadbandInverse (plan -> valve command, V), or
         None.
     P : settings vector. F, Fj : interval map and its Jacobians (:mod:`.model`).
+    Fi, m_int : the states at the m_int interior RK4 points of an interval and their
+        Jacobians (:func:`.model.interior_map`; None, 0: limits at the nodes only).
+    n_rows : rows of the condensed QP.
     step : the SQP step function (:func:`.qp.sqp_step`).
     """
 
@@ -51,6 +54,14 @@ class Problem:
         self.P = self._settings_vector(c)
         self.F, self.Fj = interval_maps(self.model, self.sx, self.u_c, self.u_s, self.T,
                                         c.substeps, c.sensitivities)
+        # limits also at the RK4 substeps between the nodes (None: at the nodes only)
+        # (not for IPOPT: cold-started, it did not converge in 300 iterations with them)
+        self.Fi = (interior_map(self.model, self.sx, self.u_c, self.u_s, self.T, c.substeps,
+                                c.sensitivities)
+                   if c.interior_limits and c.mode != "ipopt" else None)
+        self.m_int = c.substeps - 1 if self.Fi is not None else 0
+        #: rows of the condensed QP: lower and upper per soft limit, node and interior point
+        self.n_rows = 2 * self.N * len(self.soft) * (1 + self.m_int)
         self.mass = float(self.model.params["load.mass"])
         # N, bound of the force estimate (anti wind-up)
         self.d_max = 0.5 * (self.p_sup - self.p_atm) * self.model.area_a
@@ -126,3 +137,4 @@ class Problem:
         if self._ipopt is None:
             self._ipopt = IpoptSolver(self)
         return self._ipopt
+
