@@ -161,7 +161,9 @@ def test_rti_is_close_to_the_ipopt_solution(rig25, nmpc, mid_transient):
 def test_sqp_with_exact_sensitivities_converges_to_ipopt(rig25, mid_transient):
     """Same problem, two solvers: the SQP fixed point is the NLP's optimum."""
     prev, y, r = mid_transient
+    # limits at the nodes in both (mode ipopt has no interior limits)
     base = NMPC.for_plant(rig25, jit=False, sensitivities="exact", tolerance=1e-9,
+                          interior_limits=False,
                           max_iterations=50)
     # prev comes from an NMPC with the same problem dimensions and settings vector
     sqp = base.with_settings(mode="sqp").solve(y, r, prev)

@@ -390,7 +390,7 @@ def rti_breakdown(nmpc, run: dict, calls: int = 200) -> dict[str, float]:
     prep, post = prepare(pb), apply_step(pb)
     if nmpc.jit:
         prep, post = compiled(prep), compiled(post)
-    qp = qp_solver(nmpc.qp_solver, pb.N + pb.ns, 2 * pb.N * len(pb.soft))
+    qp = qp_solver(nmpc.qp_solver, pb.N + pb.ns, pb.n_rows)
 
     def med(fn) -> float:
         fn()

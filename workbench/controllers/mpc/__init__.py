@@ -50,7 +50,11 @@ but is only close to optimal (on the tests, 1e-3 V from IPOPT's commands);
 The controller reads the full state (x, v, p_a, p_b) from the measurements the
 simulator passes; its prediction model must therefore be a 4-state plant
 (:meth:`NMPC.for_plant` reduces any plant file to one: lines, spool dynamics, heat
-transfer and supply droop are left to the feedback). A force observer
+transfer and supply droop are left to the feedback). A valve deadband
+or null offset in the model is planned through: the NMPC plans in the compensated
+command (its model has no dead zone, where a linearisation at the centre would have
+no authority) and applies the plan through the deadband inverse
+(:func:`.model.planning_model`). A force observer
 (``disturbance_gain``) estimates what the model lacks (dry friction, a load) from
 the velocity it mispredicted, which gives the loop integral action. Without a
 ``preview`` the reference is known only at the current sample: over the horizon it
@@ -79,6 +83,8 @@ Layout
 :mod:`.model`
     The prediction model (:func:`prediction_model`), the scaled RK4 interval map and
     its Jacobians, the reference over the horizon (:func:`horizon_reference`).
+:mod:`.limits`
+    The soft-limit rows between the shooting nodes (``interior_limits``).
 :mod:`.problem`
     The discretised problem: scaling, limits, weights, the force observer.
 :mod:`.qp`

@@ -284,7 +284,7 @@ def _daqp_paths() -> tuple[str, str] | None:
 
 def _source(pb) -> str:
     """The generated step (prep, DAQP, post) followed by the driver."""
-    nz, nc = pb.N + pb.ns, 2 * pb.N * len(pb.soft)
+    nz, nc = pb.N + pb.ns, pb.n_rows
     funs = (prepare(pb), qp_solver("daqp", nz, nc), apply_step(pb))
     _check_layout(*funs)
     with tempfile.TemporaryDirectory(prefix="wb_fast_") as tmp:
@@ -478,6 +478,8 @@ class CompiledNMPC:
         else:
             self._node_reference(state, r)
             self._call_ref(self._h, state.ptr, self._yp, r, self._rv.ctypes.data, self._up)
+        if self.pb.valve is not None:                  # planned in the compensated command
+            return state, self.pb.valve(self._u[0])
         return state, self._u[0]
 
     def _node_reference(self, state: CompiledMemory, r: float) -> None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .model import V_SCALE, interval_maps
+from .model import V_SCALE, interior_map, interval_maps, planning_model
 from .nlp import IpoptSolver
 from .qp import sqp_step
 
@@ -34,21 +34,37 @@ class Problem:
         and span, V; w_lo, w_hi : scaled command range.
     lo, hi : scaled limits by state index; soft : (state index, slack index) of each
         soft limit; ns : number of slacks (stroke, pressure, speed).
+    model : the model planned with (:func:`.model.planning_model`: without deadband
+        and null offset); valve : its DeadbandInverse (plan -> valve command, V), or
+        None.
     P : settings vector. F, Fj : interval map and its Jacobians (:mod:`.model`).
+    Fi, m_int : the states at the m_int interior RK4 points of an interval and their
+        Jacobians (:func:`.model.interior_map`; None, 0: limits at the nodes only).
+    n_rows : rows of the condensed QP.
     step : the SQP step function (:func:`.qp.sqp_step`).
     """
 
     def __init__(self, c) -> None:
         self.c = c
         self.nx = 4
-        self._scaling(c.model)
+        # plans in the deadband-compensated command (model.planning_model)
+        self.model, self.valve = planning_model(c.model)
+        self._scaling(self.model)
         self._limits(c)
         self.P = self._settings_vector(c)
-        self.F, self.Fj = interval_maps(c.model, self.sx, self.u_c, self.u_s, self.T,
+        self.F, self.Fj = interval_maps(self.model, self.sx, self.u_c, self.u_s, self.T,
                                         c.substeps, c.sensitivities)
-        self.mass = float(c.model.params["load.mass"])
+        # limits also at the RK4 substeps between the nodes (None: at the nodes only)
+        # (not for IPOPT: cold-started, it did not converge in 300 iterations with them)
+        self.Fi = (interior_map(self.model, self.sx, self.u_c, self.u_s, self.T, c.substeps,
+                                c.sensitivities)
+                   if c.interior_limits and c.mode != "ipopt" else None)
+        self.m_int = c.substeps - 1 if self.Fi is not None else 0
+        #: rows of the condensed QP: lower and upper per soft limit, node and interior point
+        self.n_rows = 2 * self.N * len(self.soft) * (1 + self.m_int)
+        self.mass = float(self.model.params["load.mass"])
         # N, bound of the force estimate (anti wind-up)
-        self.d_max = 0.5 * (self.p_sup - self.p_atm) * c.model.area_a
+        self.d_max = 0.5 * (self.p_sup - self.p_atm) * self.model.area_a
         self.step = sqp_step(self)
         self._ipopt: IpoptSolver | None = None
 
@@ -93,6 +109,11 @@ class Problem:
             [self.lo.get(i, -1e3) for i in range(nx)], [self.hi.get(i, 1e3) for i in range(nx)],
             [c.disturbance_gain]])
 
+    def command(self, w: float) -> float:
+        """Valve command (V) for the scaled planned command ``w``."""
+        u = self.u_c + self.u_s * w
+        return u if self.valve is None else self.valve(u)
+
     def unpack(self, P):
         """(wx (N,), wv (N,), wdu, rho1, rho2, lo (4,), hi (4,)) from the settings vector."""
         N, nx = self.N, self.nx
@@ -116,3 +137,4 @@ class Problem:
         if self._ipopt is None:
             self._ipopt = IpoptSolver(self)
         return self._ipopt
+

@@ -24,6 +24,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from .limits import interior_rows
+
 
 __all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver"]
 
@@ -76,7 +78,7 @@ class _LazyStep:
 
 def _step(pb, prep: ca.Function, post: ca.Function) -> ca.Function:
     """prep, the QP, post as one function (see :func:`sqp_step`)."""
-    qp = qp_solver(pb.c.qp_solver, pb.N + pb.ns, 2 * pb.N * len(pb.soft))
+    qp = qp_solver(pb.c.qp_solver, pb.N + pb.ns, pb.n_rows)
     ins = [ca.MX.sym(prep.name_in(i), prep.sparsity_in(i)) for i in range(prep.n_in())]
     o = prep(*ins)
     sol = qp(h=o[0], g=o[1], a=o[2], lba=o[3], uba=o[4], lbx=o[5], ubx=o[6])
@@ -105,7 +107,8 @@ def prepare(pb) -> ca.Function:
     X = ca.if_else(shift, ca.horzcat(Xp[:, 1:], Xp[:, N]), Xp)
     U = ca.if_else(shift, ca.horzcat(Up[:, 1:], Up[:, N - 1]), Up)
     Xn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
-    out = condense(pb)(A, B, Xn - X[:, 1:], x0 - X[:, 0], X, U, R, VR, up, P)
+    inner = [] if pb.Fi is None else pb.Fi.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
+    out = condense(pb)(A, B, Xn - X[:, 1:], x0 - X[:, 0], X, U, R, VR, up, P, *inner)
     return ca.Function("wb_nmpc_prep", [Xp, Up, shift, x0, R, VR, up, zprev, dprev, est, P],
                        [*out, X, U, d])
 
@@ -132,6 +135,9 @@ def condense(pb, Sym=ca.MX) -> ca.Function:
     VR = Sym.sym("VR", 1, N + 1)
     up = Sym.sym("up")
     P = Sym.sym("P", pb.P.size)
+    inner = [] if pb.Fi is None else [Sym.sym(n, pb.Fi.sparsity_out(i).shape[0],
+                                              pb.Fi.sparsity_out(i).shape[1] * N)
+                                      for i, n in enumerate(("Zi", "Ai", "Bi"))]
     wx, wv, wdu, rho1, rho2, lo, hi = pb.unpack(P)
     # dz_k = h_k + G_k dw, G_k with k non-zero columns
     hs, Gs = [dz0], [Sym(nx, 0)]
@@ -165,12 +171,24 @@ def condense(pb, Sym=ca.MX) -> ca.Function:
         rows += [ca.horzcat(S[i], e), ca.horzcat(S[i], -e)]
         lb += [lo[i] - v, -ca.inf * one]
         ub += [ca.inf * one, hi[i] - v]
+    if inner:                                          # limits between the nodes
+        more = interior_rows(pb, *inner, hs, Gf, lo, hi, _slack_columns(ns))
+        rows, lb, ub = rows + more[0], lb + more[1], ub + more[2]
     lbx = ca.vertcat(pb.w_lo - U.T, ca.DM.zeros(ns))
     ubx = ca.vertcat(pb.w_hi - U.T, ca.inf * ca.DM.ones(ns))
-    return ca.Function("wb_nmpc_condense", [A_, B_, c, dz0, X, U, R, VR, up, P],
+    return ca.Function("wb_nmpc_condense", [A_, B_, c, dz0, X, U, R, VR, up, P, *inner],
                        [ca.densify(H), ca.densify(g), ca.densify(ca.vertcat(*rows)),
                         ca.vertcat(*lb), ca.vertcat(*ub), lbx, ubx, Hh,
                         ca.densify(ca.vertcat(*Gf))])
+
+
+def _slack_columns(ns: int):
+    """slack index j, rows n -> (n, ns) DM with ones in column j."""
+    def cols(j: int, n: int):
+        e = ca.DM.zeros(n, ns)
+        e[:, j] = 1.0
+        return e
+    return cols
 
 
 def apply_step(pb) -> ca.Function:

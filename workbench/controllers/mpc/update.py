@@ -225,5 +225,5 @@ def solution(pb, state: NMPCState, r: float, r_prev: float | None) -> Solution:
     R, _ = node_reference(pb, r, r_prev, state.t)
     X = np.asarray(state.X)
     return Solution(time=pb.T * np.arange(pb.N + 1), states=(X * pb.sx[:, None]).T,
-                    commands=pb.u_c + pb.u_s * np.asarray(state.U).ravel(),
+                    commands=np.array([pb.command(w) for w in np.asarray(state.U).ravel()]),
                     reference=R, info=state.info, state=state)
