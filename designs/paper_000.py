@@ -42,7 +42,6 @@ Usage: python designs/paper_000.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -55,7 +54,7 @@ from workbench.identify.arx import fit_arx
 from workbench.identify.arx import validate as arx_validate
 from workbench.identify.excitation import aprbs, as_reference
 from workbench.identify.grey_box import estimate
-from workbench.params import atomic_write_text, json_safe
+from workbench.params import atomic_write_text
 from workbench.recording import Recording
 
 if str(Path(__file__).resolve().parent) not in sys.path:    # the sibling modules below
@@ -490,10 +489,7 @@ def _finish(out, results, cal, ex, sweeps, meas, done, t_start, quick) -> int:
                    for k, v in sweeps.items()},
         "run_time_s": time.perf_counter() - t_start,
     }
-    plain = json_safe(json.loads(json.dumps(summary, default=rp.json_default)))
-    atomic_write_text(out / "summary.json", json.dumps(plain, indent=1, allow_nan=False) + "\n")
-    print(f"paper 000: {n_ok} of {len(results)} paper results agree")
-    print(f"  report: {html}\n          {pdf}")
+    rp.write_summary(out, summary, f"paper 000: {n_ok} of {len(results)} paper results agree", html, pdf)
     return 0
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 
@@ -10,7 +9,6 @@ import numpy as np
 
 from workbench import plots
 from workbench import report as rp
-from workbench.params import atomic_write_text, json_safe
 from paper_001 import (A_SOUND, BAND_FLOORS, DELAY_THRESHOLD, DELAY_TOL, DT_INTERVAL, GAIN_MARGIN,
                        HOLD, NULL_OFFSET, PAPER, PLANT, STEP, TI_SETTLING, TITLE, TRANSIENT_BAND,
                        TRIES, eq4_attenuation)
@@ -434,8 +432,5 @@ def finish(out, res, steps, ex, fit, sizes, valve, compare, done, t_start, quick
                          for k, v in ex["td"].items()},
         "run_time_s": time.perf_counter() - t_start,
     }
-    plain = json_safe(json.loads(json.dumps(summary, default=rp.json_default)))
-    atomic_write_text(out / "summary.json", json.dumps(plain, indent=1, allow_nan=False) + "\n")
-    print(f"paper 001: {n_ok} of {len(res)} paper results agree")
-    print(f"  report: {html}\n          {pdf}")
+    rp.write_summary(out, summary, f"paper 001: {n_ok} of {len(res)} paper results agree", html, pdf)
     return 0

@@ -27,7 +27,6 @@ Usage: python designs/paper_002.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from dataclasses import dataclass
@@ -298,9 +297,7 @@ def _body(args, out: Path, done: list) -> int:
                    "automatic": choice.to_dict(), "noise_sweep": sweep,
                    "robustness": rob.to_dict(), "nominal_passed": bool(nominal.passed), "quick": bool(args.quick),
                    "run_time_s": time.perf_counter() - t0}
-        atomic_write_text(out / "summary.json",
-                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
-    print(f"paper 002: {n_ok} of {len(rows)} results agree\n  report: {html}\n          {pdf}")
+        rp.write_summary(out, summary, f"paper 002: {n_ok} of {len(rows)} results agree", html, pdf)
     return 0
 
 

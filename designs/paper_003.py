@@ -35,7 +35,6 @@ Usage: python designs/paper_003.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -354,9 +353,7 @@ def _body(args, out: Path, done: list) -> int:
                    "tank_errors_I_noise_free_percent": {str(k): v for k, v in clean.items()},
                    "border_error_I": border, "gain_bands": bands, "other_seeds": spread,
                    "quick": bool(args.quick), "run_time_s": time.perf_counter() - t0}
-        atomic_write_text(out / "summary.json",
-                          json.dumps(summary, indent=1, default=rp.json_default) + "\n")
-    print(f"paper 003: {n_ok} of {len(rows)} results agree\n  report: {html}\n          {pdf}")
+        rp.write_summary(out, summary, f"paper 003: {n_ok} of {len(rows)} results agree", html, pdf)
     return 0
 
 

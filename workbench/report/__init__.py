@@ -32,14 +32,14 @@ A design that fails still leaves a report saying what failed::
 
 from .document import (OUTCOMES, Figure, Heading, KeyValues, Paragraph, Preformatted, Report,
                        ReportError, Section, Status, Table, fmt)
-from .design import design_arguments, json_default, progress, run_design, say, step
+from .design import design_arguments, json_default, progress, run_design, say, step, write_summary
 from .html import render_html
 from .output import write, write_failure
 from .pdf import render_pdf
 from .provenance import file_sha256, git_revision, provenance
 
 __all__ = [
-    "run_design", "design_arguments", "step", "progress", "say", "json_default",
+    "run_design", "design_arguments", "step", "progress", "say", "json_default", "write_summary",
     "Report", "Section", "Heading", "Paragraph", "Preformatted", "KeyValues", "Table",
     "Figure", "Status", "OUTCOMES", "ReportError", "fmt", "provenance", "git_revision",
     "file_sha256", "render_html", "render_pdf", "write", "write_failure",

@@ -21,7 +21,8 @@ from typing import Callable, Iterable, Iterator, TypeVar
 from .output import write_failure
 from .provenance import provenance
 
-__all__ = ["step", "progress", "say", "run_design", "json_default", "design_arguments",
+__all__ = ["step", "progress", "say", "run_design", "json_default", "write_summary",
+           "design_arguments",
            "PROGRESS_INTERVAL"]
 
 #: Seconds of work after which a design tells how far it is (issue 15: no silent step).
@@ -137,6 +138,14 @@ def json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
+
+
+def write_summary(out, summary: dict, line: str, html, pdf) -> None:
+    """Write a design's ``out/summary.json`` (strict JSON, whole or not at all) and print
+    its result line and the report's two paths."""
+    from ..output import write_json
+    write_json(Path(out) / "summary.json", summary, indent=1, default=json_default)
+    print(f"{line}\n  report: {html}\n          {pdf}")
 
 
 def design_arguments(description: str, default_out: str | Path, quick_help: str,
