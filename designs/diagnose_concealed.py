@@ -312,13 +312,19 @@ def sets_section(rows: list[dict]) -> tuple[rp.Section, bool, str]:
                            "vs concealed; relative error of each concealed value in "
                            "plant.augmented.toml; fit per signal before -> after (noise "
                            "floor: the fit a perfect model reaches)")
-    concealed = sorted({e for r in rows for e in r["concealed"]})
-    named_cols = concealed + ["none", "error"]
-    conf = [[e] + [sum(1 for r in rows if e in r["concealed"] and c in r["named"])
-                   for c in named_cols] for e in concealed]
-    conf_tab = rp.Table(["concealed \\ named"] + named_cols, conf,
-                        caption="Confusion table of the sets: how often each concealed effect's "
-                                "case named each effect")
+    effects = sorted({e for r in rows for e in (*r["concealed"], *r["named"])} - {"none"})
+    conf = []
+    for e in effects:
+        hid = [r for r in rows if e in r["concealed"]]
+        conf.append([e, len(hid), sum(1 for r in hid if e in r["named"]),
+                     sum(1 for r in hid if e not in r["named"]),
+                     sum(1 for r in rows if e in r["named"] and e not in r["concealed"])])
+    conf_tab = rp.Table(["effect", "concealed in", "named there", "missed",
+                         "named, not concealed"], conf,
+                        units=["", "cases", "cases", "cases", "cases"],
+                        caption="Per effect over the sets above: cases that concealed it, "
+                                "how many of those named it and missed it, and cases that "
+                                "named it without concealing it (spurious)")
     text = f"{len(ok)}/{len(rows)} sets named exactly"
     return rp.Section("Sets of effects and wrong nominal values",
                       [rp.Paragraph(text), tab, conf_tab]), len(ok) == len(rows), text

@@ -211,6 +211,30 @@ def test_concealed_quick_names_each_effect_and_nothing_else(concealed):
     assert "PASS" in (out / "report.html").read_text()
 
 
+def test_sets_table_counts_hits_misses_and_spurious_per_effect():
+    """diagnose_concealed's per-effect table over the sets: a pair whose partner is
+    named counts for both effects, not as a confusion; a named effect that was not
+    concealed is spurious; 'none' is not an effect. Counts written out by hand."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "designs"))
+    import diagnose_concealed as dc
+    rows = [
+        {"case": 0, "label": "a + b", "concealed": ["dry_friction", "leakage"],
+         "named": ["dry_friction", "leakage"], "correct": True, "wall_s": 1.0},
+        {"case": 1, "label": "a + c", "concealed": ["dry_friction", "valve_offset"],
+         "named": ["valve_offset", "line_dynamics"], "correct": False, "wall_s": 1.0},
+        {"case": 2, "label": "nominal", "concealed": [], "named": ["none"],
+         "correct": True, "wall_s": 1.0},
+    ]
+    section, all_ok, text = dc.sets_section(rows)
+    table = section.blocks[2]
+    got = {r[0]: tuple(r[1:]) for r in table.rows}
+    # effect: (concealed in, named there, missed, named without being concealed)
+    assert got == {"dry_friction": (2, 1, 1, 0), "leakage": (1, 1, 0, 0),
+                   "valve_offset": (1, 1, 0, 0), "line_dynamics": (0, 0, 0, 1)}
+    assert text == "2/3 sets named exactly" and all_ok is False
+
+
 def test_concealed_quick_fitted_values(concealed):
     _, _, s = concealed
     by_kind = {c["concealed"]: c for c in s["cases"]}
