@@ -456,3 +456,37 @@ def test_a_table_whose_last_row_is_tall_splits_instead_of_moving(tmp_path, n_par
     assert len(fills) == 2 and fills[0] >= 0.6, [round(f, 2) for f in fills]
     pages = _pdf_pages_text(pdf_path)
     assert "key 10" in pages[0] and "key 11" in pages[1] and "command line" in pages[1]
+
+
+def test_a_table_reportlab_sees_whole_splits_when_the_page_does_not_hold_it():
+    # nonlinear_comparison's provenance (16 rows) after a figure: the rows' heights
+    # summed to 251 pt of the 260 pt left for the table, so reportlab's split returned
+    # the table whole; with the heading's spacing the group was 2.8 pt too tall, and
+    # with no second part the whole table moved to the next page, leaving this one
+    # 41 % empty. Offered 3 pt less than the group needs, it must now split by rows.
+    import io
+    from reportlab.lib.styles import ParagraphStyle
+    from reportlab.pdfgen.canvas import Canvas
+    from reportlab.platypus import Paragraph as RLParagraph, Spacer, Table as RLTable
+    from reportlab.platypus.doctemplate import FrameBreak
+    from workbench.report.pdf_flow import KeepGroup
+    head = RLParagraph("6 Provenance", ParagraphStyle("h2", fontSize=13.5, leading=17,
+                                                      spaceBefore=14, spaceAfter=6))
+    table = RLTable([[f"key {i}", f"value {i}"] for i in range(16)])
+    group = KeepGroup([head], table, [Spacer(1, 8)], 734.0)
+    group.canv = Canvas(io.BytesIO())
+    aw = 450.0
+    ah = group._height([head, table], aw) - 3.0                # 3 pt short
+    rows_h = table.wrap(aw, 1e6)[1]
+    assert rows_h < ah - group._height([head], aw)             # reportlab sees it whole
+    parts = group.split(aw, ah)
+    assert not isinstance(parts[0], type(FrameBreak)), parts     # not moved whole
+    tables = [p for p in parts if isinstance(p, RLTable)]
+    assert len(tables) == 2 and len(tables[1]._cellvalues) >= 2
+    assert len(tables[0]._cellvalues) + len(tables[1]._cellvalues) == 16
+    # and a table that fits but for the spacer after it stays on the page, whole
+    ah = group._height([head, table], aw) + 1.0
+    assert ah < group.natural_height(aw)
+    parts = group.split(aw, ah)
+    assert not isinstance(parts[0], type(FrameBreak))
+    assert [len(p._cellvalues) for p in parts if isinstance(p, RLTable)] == [16]

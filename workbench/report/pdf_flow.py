@@ -143,6 +143,12 @@ class KeepGroup(Flowable):
         head = head if isinstance(head, int) else len(head)
         for _ in range(3 + MIN_ROWS):  # spacing and widows: shrink the room until right
             parts = self.body.split(aw, room) if room > 0 else []
+            if len(parts) == 1:    # reportlab sees the table whole within room:
+                over = self._height(self.lead + parts, aw) - ah
+                if over <= 0:      # it fits; only the tail (a spacer) goes over
+                    return parts
+                room -= over + _FUZZ   # the heading's spacing it left out: take less
+                continue
             if len(parts) < 2:
                 return []
             first = len(parts[0]._cellvalues) - head
