@@ -490,3 +490,24 @@ def test_a_table_reportlab_sees_whole_splits_when_the_page_does_not_hold_it():
     parts = group.split(aw, ah)
     assert not isinstance(parts[0], type(FrameBreak))
     assert [len(p._cellvalues) for p in parts if isinstance(p, RLTable)] == [16]
+
+
+def test_a_table_is_not_split_to_leave_an_orphan_tail_or_a_blank_page(tmp_path):
+    # situm_p_pd's provenance: a split carried 2 of its 14 rows to a last page of their
+    # own. A table that fits on the next page moves there whole rather than carry less
+    # than MAX_CARRY of its rows (12 rows here: any split carries at least 3), when
+    # the page it leaves stays within MOVE_EMPTY (a 12-row list is a quarter page, so
+    # wherever it splits, moving it leaves less than that). And a table that fits but
+    # for the spacer after it must not open an empty page for the spacer.
+    # one short line at a time after 56 LOREMs: the page end walks through the list
+    # (before this rule, 3 lines gave [10, 2]; 57 LOREMs gave a blank 4th page)
+    cases = [(56, k) for k in range(8)] + [(57, 0)]
+    for n, k in cases:
+        blocks = ([rp.Paragraph(LOREM * n)] + [rp.Paragraph(f"short line {j}") for j in range(k)]
+                  + [rp.KeyValues([(f"item {i}", i) for i in range(12)])])
+        _, pdf_path = rp.write(rp.Report("w", sections=[rp.Section("s", blocks)]),
+                               tmp_path / f"{n}_{k}")
+        counts = [len(re.findall(r"item \d+", p)) for p in _pdf_pages_text(pdf_path)]
+        parts = [c for c in counts if c]
+        assert sum(parts) == 12 and counts[-1] > 0, (n, k, counts)        # no blank page
+        assert len(parts) == 1 or parts[-1] >= 3, (n, k, counts)          # no orphan tail

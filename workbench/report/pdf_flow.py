@@ -34,7 +34,8 @@ from reportlab.platypus import Image
 from reportlab.platypus.doctemplate import FrameBreak
 from reportlab.platypus.flowables import Flowable, _listWrapOn
 
-__all__ = ["KeepGroup", "float_figures", "MAX_EMPTY", "MIN_SCALE", "EASY_SCALE"]
+__all__ = ["KeepGroup", "float_figures", "MAX_EMPTY", "MIN_SCALE", "EASY_SCALE", "MAX_CARRY",
+           "MOVE_EMPTY"]
 
 #: Largest fraction of a page's text frame left empty before a figure or table
 #: that moves to the next page.
@@ -49,6 +50,16 @@ EASY_SCALE = 0.85
 
 #: Fewest table rows left at the foot of a page or carried to the next one.
 MIN_ROWS = 2
+
+#: A split that would carry less than this fraction of a table's rows to the next
+#: page moves the table whole instead, if that leaves at most :data:`MOVE_EMPTY` of
+#: this page empty.
+MAX_CARRY = 0.25
+
+#: Largest fraction of a page left empty by moving a table whole to avoid an orphan
+#: tail (below :data:`MAX_EMPTY`: the page's ink ends a few pt above the frame space
+#: used, and a page measured at 59 % must not come of it).
+MOVE_EMPTY = 0.35
 
 _FUZZ = 1.0  # pt of slack when fitting scaled figures (rounding in reportlab's frame)
 
@@ -129,12 +140,31 @@ class KeepGroup(Flowable):
                 return self.lead + [img] + self.tail
             return ([] if at_top else [FrameBreak()]) + self.content()
         parts = self._split_rows(aw, ah)
+        if parts and not at_top and self._orphan_tail(parts, aw, ah):
+            return [FrameBreak()] + self.content()
         if not parts and at_top:  # a page is not enough: split anywhere, as reportlab does
             room = ah - self._height(self.lead, aw) - self.body.getSpaceBefore()
             parts = list(self.body.split(aw, room)) if room > 0 else []
+        if len(parts) == 1:        # the table fits but for the tail (a spacer): drop it
+            return self.lead + parts   # here, or it would open a page of its own
         if parts:
             return self.lead + parts + self.tail
         return ([] if at_top else [FrameBreak()]) + self.content()
+
+    def _orphan_tail(self, parts: list, aw: float, ah: float) -> bool:
+        """True when a split would carry only a few rows (fewer than :data:`MAX_CARRY`
+        of the table) to the next page while the whole table fits there and moving it
+        leaves this page at most :data:`MOVE_EMPTY` empty: a report's last page holding
+        two rows of its provenance reads worse than the table kept together."""
+        tables = [p for p in parts if hasattr(p, "_cellvalues")]
+        if len(tables) < 2:
+            return False
+        head = getattr(self.body, "repeatRows", 0) or 0
+        head = head if isinstance(head, int) else len(head)
+        carried = sum(len(t._cellvalues) - head for t in tables[1:])
+        rows = len(self.body._cellvalues) - head
+        return (carried < MAX_CARRY * rows and ah <= MOVE_EMPTY * self.frame_height
+                and self.natural_height(aw) <= self.frame_height)
 
     def _split_rows(self, aw: float, ah: float) -> list:
         """The table split where the page ends, at least :data:`MIN_ROWS` rows each side."""
