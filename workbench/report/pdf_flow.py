@@ -151,6 +151,11 @@ class KeepGroup(Flowable):
             return self.lead + parts + self.tail
         return ([] if at_top else [FrameBreak()]) + self.content()
 
+    def _header_rows(self) -> int:
+        """Rows the table repeats on every page (its header)."""
+        head = getattr(self.body, "repeatRows", 0) or 0
+        return head if isinstance(head, int) else len(head)
+
     def _orphan_tail(self, parts: list, aw: float, ah: float) -> bool:
         """True when a split would carry only a few rows (fewer than :data:`MAX_CARRY`
         of the table) to the next page while the whole table fits there and moving it
@@ -159,8 +164,7 @@ class KeepGroup(Flowable):
         tables = [p for p in parts if hasattr(p, "_cellvalues")]
         if len(tables) < 2:
             return False
-        head = getattr(self.body, "repeatRows", 0) or 0
-        head = head if isinstance(head, int) else len(head)
+        head = self._header_rows()
         carried = sum(len(t._cellvalues) - head for t in tables[1:])
         rows = len(self.body._cellvalues) - head
         return (carried < MAX_CARRY * rows and ah <= MOVE_EMPTY * self.frame_height
@@ -169,8 +173,7 @@ class KeepGroup(Flowable):
     def _split_rows(self, aw: float, ah: float) -> list:
         """The table split where the page ends, at least :data:`MIN_ROWS` rows each side."""
         room = ah - self._height(self.lead, aw) - self.body.getSpaceBefore()
-        head = getattr(self.body, "repeatRows", 0) or 0
-        head = head if isinstance(head, int) else len(head)
+        head = self._header_rows()
         for _ in range(3 + MIN_ROWS):  # spacing and widows: shrink the room until right
             parts = self.body.split(aw, room) if room > 0 else []
             if len(parts) == 1:    # reportlab sees the table whole within room:
