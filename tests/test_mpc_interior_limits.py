@@ -91,13 +91,110 @@ def test_pressure_limit_holds_between_the_nodes(rig25):
 
 
 def test_interior_rows_are_in_the_qp(rig25):
-    """The condensed QP has the interior rows: 2 x N x soft limits x (1 + substeps - 1);
-    mode ipopt has none (module text of the setting)."""
+    """The condensed QP has the interior rows: 2 x soft limits x (N nodes + (N - 1)
+    intervals x (substeps - 1) points; none in the first interval); mode ipopt has
+    none (module text of the setting)."""
     on = NMPC.for_plant(rig25, jit=False, interior_limits=True)._problem
-    off = NMPC.for_plant(rig25, jit=False)._problem                 # the default: off
+    off = NMPC.for_plant(rig25, jit=False, interior_limits=False)._problem
     assert off.n_rows == 2 * off.N * len(off.soft)
-    assert on.n_rows == off.n_rows * on.c.substeps
+    m = on.c.substeps - 1
+    assert on.n_rows == 2 * len(on.soft) * (on.N + (on.N - 1) * m)
     one = NMPC.for_plant(rig25, jit=False, substeps=1, interior_limits=True)._problem
     assert one.Fi is None and one.n_rows == 2 * one.N * len(one.soft)
     ipopt = NMPC.for_plant(rig25, jit=False, mode="ipopt", interior_limits=True)._problem
     assert ipopt.Fi is None and ipopt.n_rows == off.n_rows
+
+
+# ---------------------------------------------------------------- closed loop, compiled
+def _loop_reference(k: int) -> float:
+    """m: hold, a 200 mm step (the 0.5 m/s speed limit active), a step to 0.47 m
+    (braking towards the far end), a 0.3 m/s ramp through the stroke margin."""
+    if k < 5:
+        return 0.10
+    if k < 45:
+        return 0.30
+    if k < 80:
+        return 0.47
+    return 0.47 + 0.3 * 0.01 * (k - 80)
+
+
+def _same_loop(rig25, a, b, samples: int) -> float:
+    """Largest difference of plan, command and force estimate of ``b`` against ``a``,
+    both fed the measurements of the loop that ``a`` closes on the rig."""
+    from workbench.simulate import Simulator
+    sim = Simulator(rig25)
+    names = ("x", "v", "p_a", "p_b")
+    idx = [rig25.state_index(k) for k in names]
+    x = rig25.initial_state(0.10)
+    sa = sb = None
+    worst = 0.0
+    for k in range(samples):
+        y = {n: float(x[i]) for n, i in zip(names, idx)}
+        r = _loop_reference(k)
+        sa, ua = a.update(sa, r, y)
+        sb, ub = b.update(sb, r, y)
+        worst = max(worst, float(np.max(np.abs(np.asarray(sa.X) - np.asarray(sb.X)))),
+                    float(np.max(np.abs(np.asarray(sa.U).ravel() - np.asarray(sb.U).ravel()))),
+                    abs(ua - ub), abs(sa.d - sb.d) / 100.0)
+        x = sim.step(x, float(np.clip(ua, 0.0, 10.0)), 0.01)[-1]
+    return worst
+
+
+@pytest.fixture(scope="module")
+def short(rig25):
+    """N = 5 (a small C source), speed limit 0.5 m/s, the limits between the nodes."""
+    return NMPC.for_plant(rig25, horizon=5, sample_time=0.01, max_speed=0.5, jit=False,
+                          interior_limits=True)
+
+
+def test_interior_rows_change_the_closed_loop(rig25, short):
+    """The loop below is one where the rows between the nodes matter: without them
+    the plans differ by far more than the 1e-8 the compiled sample is held to."""
+    assert _same_loop(rig25, short, short.with_settings(interior_limits=False), 100) > 1e-3
+
+
+def test_compiled_sample_with_interior_limits_gives_the_same_plans(rig25, short):
+    """CompiledNMPC (one C call per sample, DAQP linked) against the Python update on
+    a closed loop with the interior rows: same CasADi graph, same QP library, so the
+    plans agree to rounding; 1e-8 (scaled units, force / 100 N) as in
+    tests/test_nmpc_compiled.py, while a row missing or misplaced moves them by > 1e-3
+    (previous test)."""
+    from workbench.controllers.mpc.fast import CompiledNMPC, compiled_unavailable
+    if compiled_unavailable() is not None:
+        pytest.skip(f"compiled NMPC step: {compiled_unavailable()}")
+    on = short.with_settings(jit=True)
+    assert on.compiled_reason is None                   # each update one C call
+    assert CompiledNMPC(on).pb.n_rows == short._problem.n_rows
+    assert _same_loop(rig25, short, on, 100) <= 1e-8
+
+
+def test_no_rows_within_the_first_sample_in_closed_loop(monkeypatch):
+    """Why the interior rows start at the second interval (limits.FIRST_INTERVAL).
+
+    ``designs/nmpc_position.py``'s plant: the rig with 1 m lines and dry friction the
+    model lacks, speed limit 2 m/s, steps to beyond both ends. The lines let the
+    speed overshoot its limit; rows within the first sample then price a violation
+    no command can change, and the exact penalty bought each small reduction with
+    the whole command range (bang-bang braking in mid-stroke, then a late brake):
+    measured chamber peak 6.24 bar (6.45 bar compiled), above the 6 bar supply.
+    From the second interval on: 5.57 bar (5.61 bar with limits at the nodes only);
+    the node limit is 5.6 bar, 5.8 bar leaves the lines' lag 0.2 bar.
+    """
+    import workbench.controllers.mpc.problem as problem
+    from workbench import simulate
+    from workbench.controllers.mpc import prediction_model
+    plant = Plant.from_toml(RIG25).with_params(**{
+        "friction.coulomb": 20.0, "friction.static": 30.0, "friction.stribeck_velocity": 0.01,
+        "lines.length": 1.0, "lines.diameter": 0.004})
+    model = prediction_model(plant, effects=())
+    L = plant.stroke
+    ref = simulate.steps([0.5 * L, 1.2 * L, -0.2 * L], hold=0.8)
+    peak = {}
+    for first in (1, 0):
+        monkeypatch.setattr(problem, "FIRST_INTERVAL", first)
+        n = NMPC(model, sample_time=0.01, max_speed=2.0, jit=False)
+        assert n._problem.first_interior == first
+        run = simulate.closed_loop(plant, n, ref, x0=0.5 * L, progress=None)
+        peak[first] = max(run["p_a"].max(), run["p_b"].max())
+    assert peak[1] <= 5.8e5, peak
+    assert peak[0] > 6.0e5, peak

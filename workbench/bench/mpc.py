@@ -276,7 +276,7 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
     ref = bench_reference(plant, FULL_S)
     t0 = time.perf_counter()
     nmpc = NMPC.for_plant(plant, horizon=20, sample_time=0.01, disturbance_gain=0.0, jit=jit,
-                          substeps=SUBSTEPS)
+                          substeps=SUBSTEPS, interior_limits=False)   # as the baselines' limits
     sqp = nmpc.with_settings(mode="sqp", max_iterations=5)
     sqp2 = nmpc.with_settings(mode="sqp", max_iterations=2)
     adaptive = nmpc.with_settings(**ADAPTIVE)

@@ -10,18 +10,21 @@ with ``substeps`` fixed steps. In scaled variables it minimises
     + slack penalties
 
 subject to the command range ``valve.command_min .. command_max`` (hard bounds) and,
-as soft constraints at the shooting nodes, the stroke ``stroke_margin .. L -
-stroke_margin``, the chamber pressures atmosphere .. supply (tightened by
-``pressure_margin``) and the speed ``max_speed``: one slack per kind over the
-horizon with an exact L1 penalty plus a small quadratic term, so a limit gives way
-only where no admissible command can keep it and the problem is always feasible.
+as soft constraints at the shooting nodes and between them (``interior_limits``:
+at RK4 substep ends at most 2.5 ms apart, from the second interval on), the stroke
+``stroke_margin .. L - stroke_margin``, the chamber pressures atmosphere .. supply
+(tightened by ``pressure_margin``) and the speed ``max_speed``: one slack per kind
+over the horizon with an exact L1 penalty plus a small quadratic term, so a limit
+gives way only where no admissible command can keep it and the problem is always
+feasible.
 
 Three solution modes share that problem:
 
 ``"rti"`` (real-time iteration, the default)
     One Gauss-Newton SQP step per sample from the previous solution shifted by one
     sample (warm start). The QP is condensed onto the N command moves (plus the
-    slacks): a dense, strictly convex QP of about 20 variables and 160 rows, solved
+    slacks): a dense, strictly convex QP of about 20 variables and 160 rows (616
+    with the rows between the nodes at 10 ms), solved
     by DAQP, a dual active-set solver made for embedded MPC. Linearisation and
     condensing, and the update of the plan from the QP step, are CasADi functions
     compiled to C through :func:`workbench.integrate.jit.compiled`; with the QP between them

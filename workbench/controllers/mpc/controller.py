@@ -88,17 +88,17 @@ class NMPC:
         mispredicted, d += gain m (v_pred - v_meas) / T, and predicted as constant
         over the horizon; this gives the loop integral action (offset-free tracking).
     interior_limits : bool
-        Enforce the stroke, pressure and speed limits also at the ends of the RK4
-        substeps between the shooting nodes (``substeps`` - 1 points per interval),
-        not only at the nodes: a braking chamber's pressure peaks, and a piston
-        reverses, between nodes. Modes rti and sqp; mode ipopt keeps the limits at
-        the nodes (cold-started IPOPT did not converge within 300 iterations with the
-        interior rows on the test's 0.1 m step). Off by default: a converged plan
-        keeps its limits between the nodes with it (speed 0.68 -> 0.504 m/s at a 0.5
-        m/s limit), but in closed loop (RTI) on ``designs/nmpc_position.py``'s limit
-        steps the simulated chamber peak rose from 5.61 to 6.45 bar (supply 6 bar);
-        not yet understood (a suspect: one slack per limit kind over the horizon,
-        so an unavoidable violation in the first interval relaxes all the others).
+        Enforce the stroke, pressure and speed limits also between the shooting
+        nodes, at RK4 substep ends at most :data:`.limits.LIMIT_SPACING` (2.5 ms)
+        apart (:func:`.limits.interior_points`: none when the sample time is that
+        short already), from the second interval on (:data:`.limits.FIRST_INTERVAL`:
+        within the first sample a limit is decided by the measured state, and
+        pricing what no command can change there made the closed loop brake
+        bang-bang in mid-stroke). A braking chamber's pressure peaks, and a piston
+        reverses, between nodes: a converged plan keeps a 0.5 m/s speed limit to
+        0.504 m/s with the rows, 0.68 m/s without. Modes rti and sqp; mode ipopt keeps
+        the limits at the nodes (cold-started IPOPT did not converge within 300
+        iterations with the interior rows on the test's 0.1 m step).
     jit : bool
         Compile the linearisation to C (cached; needs a C compiler, else CasADi's
         virtual machine evaluates it).
@@ -135,7 +135,7 @@ class NMPC:
     warm_start: bool = field(default=True, metadata=_meta("", "shift previous solution"))
     reference_rate_limit: float = field(default=0.5, metadata=_meta("m/s", "ramp detection"))
     disturbance_gain: float = field(default=1.0, metadata=_meta("-", "force observer gain"))
-    interior_limits: bool = field(default=False, metadata=_meta("", "limits between nodes"))
+    interior_limits: bool = field(default=True, metadata=_meta("", "limits between nodes"))
     jit: bool = field(default=True, metadata=_meta("", "compile to C"))
     preview: Any = field(default=None, metadata=_meta("", "reference known in advance"))
     compiled_sample: bool = field(default=True, metadata=_meta("", "one C call per sample"))

@@ -209,27 +209,31 @@ def interval_maps(model, scales: np.ndarray, u_center: float, u_span: float,
 
 
 def interior_map(model, scales: np.ndarray, u_center: float, u_span: float,
-                 sample_time: float, substeps: int, sensitivities: str) -> ca.Function | None:
-    """The states between the shooting nodes (the RK4 substeps' ends), and their
+                 sample_time: float, substeps: int, sensitivities: str,
+                 points: Sequence[int] | None = None) -> ca.Function | None:
+    """The states between the shooting nodes (RK4 substeps' ends), and their
     Jacobians, for limits enforced between the nodes.
 
-    Same parameters as :func:`interval_maps`; the Jacobians of the point at time
-    j h (h = sample_time / substeps) are the Pade approximant over j h, or exact.
+    Same parameters as :func:`interval_maps`; ``points`` are the substep ends j (1 ..
+    ``substeps`` - 1; default all of them). The Jacobians of the point at time j h
+    (h = sample_time / substeps) are the Pade approximant over j h, or exact.
 
     Returns
     -------
     casadi.Function or None
         ``wb_nmpc_Fi(z, w, d) -> (Z (nx, m), dZ/dz (nx, nx m), dZ/dw (nx, m))`` for
-        the m = substeps - 1 interior points; None with one substep (no interior
-        point).
+        the m points; None without any (one substep, or ``points`` empty).
     """
-    m = substeps - 1
-    if m < 1:
+    pts_at = list(range(1, substeps)) if points is None else sorted(set(int(j) for j in points))
+    if any(not 1 <= j < substeps for j in pts_at):
+        raise InputError(f"interior points are substep ends 1 .. {substeps - 1}, got {pts_at}")
+    if not pts_at:
         return None
     z, w, d, fz, fc = _scaled_rhs(model, scales, u_center, u_span)
-    pts = _rk4_states(fc, z, w, d, sample_time, substeps)[:m]
+    ends = _rk4_states(fc, z, w, d, sample_time, substeps)
+    pts = [ends[j - 1] for j in pts_at]
     jz, jw = [], []
-    for j, zj in enumerate(pts, start=1):
+    for j, zj in zip(pts_at, pts):
         if sensitivities == "exact":
             a, b = ca.jacobian(zj, z), ca.jacobian(zj, w)
         else:

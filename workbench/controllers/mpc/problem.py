@@ -12,6 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .limits import FIRST_INTERVAL, interior_points
 from .model import V_SCALE, interior_map, interval_maps, planning_model
 from .nlp import IpoptSolver
 from .qp import sqp_step
@@ -38,8 +39,12 @@ class Problem:
         and null offset); valve : its DeadbandInverse (plan -> valve command, V), or
         None.
     P : settings vector. F, Fj : interval map and its Jacobians (:mod:`.model`).
-    Fi, m_int : the states at the m_int interior RK4 points of an interval and their
-        Jacobians (:func:`.model.interior_map`; None, 0: limits at the nodes only).
+    points : the RK4 substep ends limited inside each interval
+        (:func:`.limits.interior_points`; empty: limits at the nodes only).
+    Fi, m_int : the states at those m_int points of an interval and their Jacobians
+        (:func:`.model.interior_map`; None, 0: none).
+    first_interior : the first interval whose interior points are limited
+        (:data:`.limits.FIRST_INTERVAL`).
     n_rows : rows of the condensed QP.
     step : the SQP step function (:func:`.qp.sqp_step`).
     """
@@ -54,14 +59,17 @@ class Problem:
         self.P = self._settings_vector(c)
         self.F, self.Fj = interval_maps(self.model, self.sx, self.u_c, self.u_s, self.T,
                                         c.substeps, c.sensitivities)
-        # limits also at the RK4 substeps between the nodes (None: at the nodes only)
+        # limits also between the nodes, at RK4 substep ends at most LIMIT_SPACING apart
         # (not for IPOPT: cold-started, it did not converge in 300 iterations with them)
-        self.Fi = (interior_map(self.model, self.sx, self.u_c, self.u_s, self.T, c.substeps,
-                                c.sensitivities)
-                   if c.interior_limits and c.mode != "ipopt" else None)
-        self.m_int = c.substeps - 1 if self.Fi is not None else 0
+        self.points = (interior_points(self.T, c.substeps)
+                       if c.interior_limits and c.mode != "ipopt" else ())
+        self.Fi = interior_map(self.model, self.sx, self.u_c, self.u_s, self.T, c.substeps,
+                               c.sensitivities, self.points) if self.points else None
+        self.m_int = len(self.points)
+        #: first interval with interior rows (:data:`.limits.FIRST_INTERVAL`)
+        self.first_interior = FIRST_INTERVAL if self.m_int else 0
         #: rows of the condensed QP: lower and upper per soft limit, node and interior point
-        self.n_rows = 2 * self.N * len(self.soft) * (1 + self.m_int)
+        self.n_rows = 2 * len(self.soft) * (self.N + (self.N - self.first_interior) * self.m_int)
         self.mass = float(self.model.params["load.mass"])
         # N, bound of the force estimate (anti wind-up)
         self.d_max = 0.5 * (self.p_sup - self.p_atm) * self.model.area_a
