@@ -166,6 +166,14 @@ def test_compiled_sample_with_interior_limits_gives_the_same_plans(rig25, short)
     assert on.compiled_reason is None                   # each update one C call
     assert CompiledNMPC(on).pb.n_rows == short._problem.n_rows
     assert _same_loop(rig25, short, on, 100) <= 1e-8
+    # with a 5 % valve deadband: planned without it and sent through its inverse
+    # (model.planning_model; the same QP, so the same compiled library)
+    dead = rig25.with_params(**{"valve.deadband": 0.05})
+    py = NMPC.for_plant(dead, horizon=5, sample_time=0.01, max_speed=0.5, jit=False,
+                        interior_limits=True)
+    assert py._problem.valve is not None
+    assert py.with_settings(jit=True).compiled_reason is None
+    assert _same_loop(dead, py, py.with_settings(jit=True), 100) <= 1e-8
 
 
 def test_no_rows_within_the_first_sample_in_closed_loop(monkeypatch):
