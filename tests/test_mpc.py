@@ -245,10 +245,15 @@ def test_design_smoke(tmp_path):
     assert rc == (0 if s["design_passed"] else 1)
     assert s["constraints_held"]
     assert s["nmpc"]["iae"] < s["pd"]["iae"]
-    # at the stroke margin (references 1.2 L and -0.2 L, second half of each hold) no
+    # at the stroke margin (references 1.2 L and -0.2 L, last 0.3 s of each hold) no
     # chatter: command std 0.34 V and p_b std 0.48 bar when the NMPC tracked the
-    # unreachable reference (8 Hz, +-0.5 mm), 0.13-0.16 V and 0.33 bar measured with
-    # the projected one (stick-slip slips remain); bound halfway
+    # unreachable reference (8 Hz, +-0.5 mm), 0.12-0.17 V and 0.30 bar measured with
+    # the projected one (the unmodelled friction's stick-slip remains); bound halfway.
+    # The same steps without the friction (lines kept): 0.006 V measured; 0.05 V says
+    # the rest is the friction's, not the lines'
     margin = s["margin_activity"]
-    assert [round(m["reference"], 3) for m in margin] == [0.6, -0.1]
-    assert max(m["command_std"] for m in margin) < 0.25
+    rows = {(m["plant"], round(m["reference"], 3)): m for m in margin}
+    assert sorted(rows) == [("with friction", -0.1), ("with friction", 0.6),
+                            ("without friction", -0.1), ("without friction", 0.6)]
+    assert max(m["command_std"] for (p, _), m in rows.items() if p == "with friction") < 0.25
+    assert max(m["command_std"] for (p, _), m in rows.items() if p != "with friction") < 0.05
