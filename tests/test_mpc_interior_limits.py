@@ -206,3 +206,24 @@ def test_no_rows_within_the_first_sample_in_closed_loop(monkeypatch):
         peak[first] = max(run["p_a"].max(), run["p_b"].max())
     assert peak[1] <= 5.8e5, peak
     assert peak[0] > 6.0e5, peak
+
+
+def test_nodes_2_5ms_apart_need_no_interior_points(rig25):
+    """limits.LIMIT_SPACING: at a 2.5 ms sample time the NMPC adds no point between
+    its nodes (interior_points is empty), and needs none: the plans of the two tests
+    above (same 0.2 s horizon, N = 80) with limits at the nodes only keep them between
+    the nodes as the 10 ms plans do with the interior rows. Measured: 0.5011 m/s and
+    5.609 bar (10 ms with rows: 0.504 m/s, 5.608 bar; without: 0.68 m/s, 5.80 bar)."""
+    from workbench.controllers.mpc.limits import LIMIT_SPACING, interior_points
+    assert LIMIT_SPACING == 2.5e-3 and interior_points(2.5e-3, 4) == ()
+    common = dict(mode="sqp", jit=False, max_iterations=50, sample_time=2.5e-3, horizon=80)
+    n = NMPC.for_plant(rig25, max_speed=0.5, **common)
+    assert n._problem.Fi is None and n._problem.n_rows == 2 * 80 * len(n._problem.soft)
+    sol = n.solve(dict(REST, x=0.1), r=0.4)
+    assert sol.info.success
+    assert np.abs(_continuous(n, sol)[1]).max() <= 1.02 * 0.5       # as the 10 ms test
+    n = NMPC.for_plant(rig25, max_speed=1.0, **common)
+    sol = n.solve(dict(REST, x=0.3), r=0.49)
+    assert sol.info.success
+    p_hi = n._problem.hi[3] * n._problem.p_sup
+    assert _continuous(n, sol)[2:].max() <= p_hi + 2e3               # as the 10 ms test

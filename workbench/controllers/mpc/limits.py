@@ -20,8 +20,9 @@ __all__ = ["interior_rows", "interior_points", "FIRST_INTERVAL", "LIMIT_SPACING"
 #: rtol 1e-10, tests/test_mpc_interior_limits.py): points 2.5 ms apart keep a 0.5
 #: m/s speed limit to 0.504 m/s and a 5.6 bar pressure limit to 5.608 bar, where
 #: points 10 ms apart (the nodes alone) let them reach 0.68 m/s and 5.80 bar. The
-#: excursion grows with the square of the gap, so an NMPC sampled at 2.5 ms or
-#: faster needs no point between its nodes (and pays nothing for the setting).
+#: excursion grows with the square of the gap: an NMPC sampled at 2.5 ms keeps them
+#: at its nodes alone to 0.501 m/s and 5.609 bar, so at 2.5 ms or faster no point is
+#: added between the nodes (and the setting costs nothing).
 LIMIT_SPACING = 2.5e-3
 
 #: The first shooting interval whose interior points get limit rows: 1, i.e. none
