@@ -306,14 +306,9 @@ def _design(args, out: Path, done: list, t_start: float) -> int:
                          f"(lines kept) the command std at the margin is "
                          f"{max(r[2] for r in margin_rows if r[0] == 'without friction'):.3f} V, "
                          f"with it up to {max(r[2] for r in margin_rows if r[0] == 'with friction'):.2f} V. "
-                         "Modelling the lines' delay does not help: predicting the measured "
-                         "state over 1 to 2.9 ms of delay (a Smith predictor, equivalent to an "
-                         "input delay in the model) raised the command std over the second "
-                         "half of these holds from 0.15-0.18 V to 0.7-1.9 V (measured when "
-                         "this was tried), since near an end the model's small chamber "
-                         "settles within the delay, the real one behind its line does not. "
-                         "A controller for a rig with dry friction models it and locks the "
-                         "valve in a hold: controllers.design (designs/precision_positioning.py). "
+                         "(Modelling the lines' delay made it worse: see "
+                         "mpc.prediction_model.) For a rig with dry friction, "
+                         "controllers.design models it and locks the valve in a hold. "
                          "Last 0.3 s of each hold beyond the stroke:"),
             rp.Table(["plant", "reference", "command std", "p_a std", "p_b std",
                       "position peak-to-peak"], margin_rows,
@@ -411,7 +406,7 @@ def _limit_figure(run, ref, nmpc, plant):
     import matplotlib.pyplot as plt
     prm = plant.params
     L = plant.stroke
-    fig, (ax_x, ax_u, ax_p) = plt.subplots(3, 1, sharex=True, figsize=(8.5, 7.0),
+    fig, (ax_x, ax_u, ax_p) = plt.subplots(3, 1, sharex=True, figsize=(8.5, 6.2),
                                            constrained_layout=True)
     t = run.time
     ax_x.plot(t, np.clip(ref(t), -0.05, L + 0.05) * 1e3, "k--", lw=1.0, label="reference r")
