@@ -112,6 +112,9 @@ def bench(quick: bool = False) -> dict:
             "error_note": "largest |rho| difference from the model-built-once loop (-)",
             "points": n * n, "points_per_s": n * n / med, "first_run_s": first,
             "loop_sample": int(len(sample)), "baselines": rows,
+            "timing_note": "ours runs in forked worker processes: its cpu_median_s is the "
+                           "parent's only; compare CPU times with single_process (the map "
+                           "in this process, one core like the baselines)",
             "single_process": {**single, "points_per_s": n * n / single["median_s"],
                                "error": float(np.max(np.abs(res["single"].rho - m.rho))),
                                "note": "the map with workers=1 (this process, one core)"},
