@@ -20,9 +20,11 @@ the modules are imported only when their benchmark runs.
 * :mod:`.simulate` -- 24 s closed loop, 4 states and 22 (lines, valve), by accuracy
   (:mod:`.adaptive_loop`) vs CVODES in a ``mapaccum`` and a compiled RK4
   (:mod:`.baselines_simulate`) at the same 0.1 % bound;
-* :mod:`.sweep` -- 200 x 200 stability map vs a point loop with the model built once;
+* :mod:`.sweep` -- 200 x 200 stability map vs a batched numpy/CasADi script and a point
+  loop, both with the model built once (:mod:`.baselines_sweep`);
 * :mod:`.rls` -- RLS over 10^6 samples vs a numba loop of the same recursion;
-* :mod:`.greybox` -- 4 parameters from a 20 s, 1 kHz recording (no baseline yet);
+* :mod:`.greybox` -- 4 parameters from a 20 s, 1 kHz recording vs scipy ``least_squares``
+  on CVODES single-shooting replays (:mod:`.baselines_greybox`);
 * :mod:`.mpc` -- NMPC per sample vs a plain Gauss-Newton RTI, IPOPT (Gauss-Newton,
   warm) and do-mpc, all in lockstep (:mod:`.baselines_mpc`);
 * :mod:`.diagnose` -- a whole diagnosis of a 24 s, 1 kHz recording.

@@ -35,8 +35,8 @@ ROOT = Path(__file__).resolve().parents[2]
 REFERENCE_RTOL = 1e-9
 #: the stated accuracy: position within this fraction of the stroke of the reference
 ACCURACY = 1e-3
-CVODES_LADDER = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
-RK4_LADDER = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
+CVODES_LADDER = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6, 1e-7)
+RK4_LADDER = (1, 2, 3, 4, 5, 6, 7, 8, 10, 12, 14, 16, 20, 24, 28, 32, 40, 48, 56, 64, 80, 96)
 
 
 def reference_profile(duration: float):

@@ -14,7 +14,8 @@ DESCRIPTION = ("Benchmarks measure ours and the strongest plain baselines in the
                "simulate (closed loop 24 s, 4 states and 22 states with lines, vs CVODES in a "
                "mapaccum and a compiled RK4 at the same accuracy); sweep (200 x 200 stability "
                "map vs a batched numpy/CasADi version); rls (RLS over 10^6 samples vs a numba "
-               "loop); greybox (4 parameters from a 20 s, 1 kHz recording); mpc (NMPC per "
+               "loop); greybox (4 parameters from a 20 s, 1 kHz recording vs scipy least_squares "
+               "on CVODES replays); mpc (NMPC per "
                "sample over a 10 s closed loop vs a plain CasADi RTI with OSQP, IPOPT and "
                "do-mpc); diagnose (24 s, 1 kHz recording: one effect, and every set of up to "
                "two effects).")
