@@ -57,9 +57,10 @@ def _reference(k: int) -> float:
     return 0.47 + 0.3 * 0.01 * (k - 120)
 
 
-def _compare(rig25, ours, ref, samples: int) -> float:
+def _compare(rig25, ours, ref, samples: int, counts: list | None = None) -> float:
     """Largest difference of plan, command, force estimate and iterations over a closed
-    loop driven by the reference NMPC, both fed the same measurements."""
+    loop driven by the reference NMPC, both fed the same measurements (``counts``: the
+    compiled sample's QP counts per sample appended)."""
     sim = Simulator(rig25)
     idx = [rig25.state_index(k) for k in NAMES]
     x = rig25.initial_state(0.10)
@@ -74,6 +75,8 @@ def _compare(rig25, ours, ref, samples: int) -> float:
                     float(np.max(np.abs(np.asarray(sa.U).ravel() - np.asarray(sf.U).ravel()))),
                     abs(ua - uf), abs(sa.d - sf.d) / 100.0, abs(sa.u_prev - sf.u_prev))
         info = ours.info(sf) if isinstance(ours, CompiledNMPC) else sf.info
+        if counts is not None:
+            counts.append(sf.qp_counts())
         assert info.iterations == sa.info.iterations and info.success == sa.info.success
         assert info.restarted == sa.info.restarted
         x = sim.step(x, float(np.clip(ua, 0.0, 10.0)), 0.01)[-1]
@@ -101,7 +104,31 @@ def test_compiled_sample_follows_a_preview(rig25, nmpc):
         k = np.floor(np.asarray(t, dtype=float) / 0.01 + 1e-9).astype(int)
         return np.array([_reference(int(i)) for i in np.ravel(k)]).reshape(np.shape(t))
     pv = nmpc.with_settings(preview=preview)
-    assert _compare(rig25, CompiledNMPC(pv), pv, 140) <= 1e-8
+    counts = []
+    assert _compare(rig25, CompiledNMPC(pv), pv, 140, counts) <= 1e-8
+    # the same plans although DAQP saw only the rows of the last working set and those
+    # its solution violated (fast_c): on this loop limits were active (rows given),
+    # rows were added (a second DAQP call in an RTI sample), and the QP was never
+    # solved on all its 40 rows (the rows given: a sum over a sample's DAQP calls)
+    calls, rows, full = np.array(counts).T
+    assert rows.sum() > 0 and calls[5:].max() >= 2 and full.sum() == 0
+    assert np.all(rows < 40 * calls)
+
+
+def test_plans_stay_inside_the_command_range(rig25, nmpc, fast):
+    # the model clips the spool at the command limits (sensitivity 1 inside, 0.5 at
+    # the limit): a plan at the limit is kept INSIDE it, so that its linearisation does
+    # not depend on the rounding of the QP's step. The 100 mm step saturates the valve.
+    from workbench.controllers.mpc.qp import INSIDE
+    pb, sim = fast.pb, Simulator(rig25)
+    x, mem, lo = rig25.initial_state(0.10), None, []
+    for k in range(30):
+        y = {n: float(x[rig25.state_index(n)]) for n in NAMES}
+        mem, u = fast.update(mem, 0.10 if k < 5 else 0.30, y)
+        lo.append(mem.U.min())
+        x = sim.step(x, float(np.clip(u, 0.0, 10.0)), 0.01)[-1]
+    assert min(lo) == pytest.approx(pb.w_lo + INSIDE, abs=1e-15)   # saturated ...
+    assert min(lo) > pb.w_lo                                         # ... inside
 
 
 def test_compiled_memory_reports_the_last_sample(rig25, fast):

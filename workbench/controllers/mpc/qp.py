@@ -27,7 +27,11 @@ import numpy as np
 from .limits import interior_rows
 
 
-__all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver"]
+__all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver", "INSIDE"]
+
+#: scaled command: the plan is kept this far inside the command range (1e-8 V on a 10 V
+#: span; see :func:`apply_step`)
+INSIDE = 1e-9
 
 
 def sqp_step(pb, jit: bool | None = None) -> "ca.Function | _LazyStep":
@@ -212,7 +216,12 @@ def apply_step(pb) -> ca.Function:
                       ca.logic_and(ca.mmax(ca.fabs(ca.vec(Xn))) < 1e2,
                                    ca.logic_and(ca.mmin(Un) >= pb.w_lo - 1e-6,
                                                 ca.mmax(Un) <= pb.w_hi + 1e-6)))
-    Un = ca.fmin(ca.fmax(Un, pb.w_lo), pb.w_hi)        # the QP's tolerance, not a clip
+    # the QP's tolerance, not a clip; and INSIDE the range: the model clips the spool
+    # at the command limits, so its sensitivity to the command is 1 inside, 0 outside
+    # and 0.5 exactly at the limit (the fmin/fmax tie): a plan left at the limit was
+    # linearised with 1 or 0.5 by the rounding of the QP's step (an exact QP solved
+    # another way flipped it: H 4x off at the next sample)
+    Un = ca.fmin(ca.fmax(Un, pb.w_lo + INSIDE), pb.w_hi - INSIDE)
     return ca.Function("wb_nmpc_post", [X, U, h, G, dw, P],
                        [Xn, Un, Un[0], viol, ok, ca.mmax(ca.fabs(du))])
 

@@ -1,0 +1,350 @@
+"""The C driver of :mod:`.fast`: one NMPC sample around the generated prep and post,
+with the QP solved by DAQP on the rows that may be active.
+
+The driver follows :mod:`.update`'s sample logic (scale, node reference, shift,
+force estimate, Gauss-Newton steps, cold-start and previous-plan fallbacks). Its QP
+is the condensed QP of :func:`.qp.condense`, solved exactly, but not on all its rows
+at once:
+
+*Constraint generation from the previous working set.* Of the 2 x N x (soft limits)
+rows (160 at N = 20 with a speed limit) only a few are ever active; DAQP's cost is
+its set-up (the Cholesky factor of H and every row times its inverse, ~n^2 / 2 per
+row; 23 us of the 29 us a sample took on all rows) and a feasibility pass over every
+row per iteration. The driver passes DAQP the command and slack bounds and only the
+rows active at the previous QP: the last sample's working set moved on by one node
+when the plan was shifted (as an RTI shifts its primal guess), the last step's within
+a sample. It then checks every row left out at DAQP's solution; the violated ones are
+added and the QP solved again. The result is the optimum of the full QP: the reduced
+QP's optimum satisfies every row, so it is feasible for the full QP and no feasible
+point has a lower cost (the reduced QP's feasible set contains the full one's); the
+QP is strictly convex, so that optimum is unique. Rows are only left out, never
+relaxed. DAQP starts from the working set (the rows and bounds active at the previous
+QP marked active in its ``sense``: its warm start; ~10 % off its time), from cold when
+that fails. After ``QP_ROUNDS`` rounds, or when DAQP fails on the reduced QP, the full
+QP is solved cold, as CasADi's DAQP plugin does.
+
+A left-out row counts as violated beyond ``QP_TOL`` (scaled units: position / stroke,
+pressure / supply); DAQP's own tolerance on the rows it holds is its ``primal_tol``
+(1e-6 on rows normalised by the factor of H). The two solutions (this one and DAQP's
+on all rows) differ by rounding where their final working sets agree, and by at most
+a violation DAQP accepts where they do not (tests: <= 1e-8 in the plan).
+"""
+
+from __future__ import annotations
+
+__all__ = ["DRIVER", "CONFIG"]
+
+#: offsets in the configuration vector of the driver (after them: the settings P)
+CONFIG = ("sx0", "sx1", "sx2", "sx3", "L", "T", "rate_limit", "r_lo", "r_hi", "max_it",
+          "tol", "rti", "warm", "u_c", "u_s", "v_scale")
+
+DRIVER = r"""
+/* ---- driver: one NMPC sample around the generated step (workbench.controllers.mpc.fast) */
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <daqp/api.h>
+#define NX 4
+#define NN %(N)d
+#define NP %(NP)d
+#define NXN (NX * (NN + 1))
+#define NZ %(NZ)d
+#define NC %(NC)d
+#define NRN %(NRN)d      /* node rows: NRN / NN blocks of NN rows, node by node */
+#define MINT %(MINT)d    /* then interior rows: blocks of NN MINT rows, MINT per node */
+#define NW (NZ + NC)     /* working set: the bounds, then the rows */
+#define QP_TOL %(QP_TOL)r
+#define QP_ROUNDS %(QP_ROUNDS)d
+#define QP_WARM %(QP_WARM)d
+%(CFG)s
+#define C_P %(NCFG)d
+/* memory layout */
+#define M_X 0
+#define M_U (M_X + NXN)
+#define M_UPREV (M_U + NN)
+#define M_RPREV (M_UPREV + 1)
+#define M_Z (M_RPREV + 1)
+#define M_D (M_Z + NX)
+#define M_T (M_D + 1)
+#define M_STARTED (M_T + 1)
+#define M_IT (M_STARTED + 1)
+#define M_OK (M_IT + 1)
+#define M_RESTARTED (M_OK + 1)
+#define M_VIOL (M_RESTARTED + 1)
+#define M_TIME (M_VIOL + NX)
+#define M_TPHASE (M_TIME + 1)   /* s, of the last sample: prep, QP, post; then samples */
+#define M_QPS (M_TPHASE + 4)    /* DAQP calls, rows given to DAQP, cold fallbacks: last sample */
+#define M_WS (M_QPS + 3)        /* working set of the last QP: +1 upper, -1 lower, 0 */
+#define M_SIZE (M_WS + NW)
+
+typedef struct {
+  const casadi_real **arg; casadi_real **res; casadi_int *iw; casadi_real *w;
+  int mem[2];
+  double cfg[C_P + NP];
+  double X[NXN], U[NN], Xn[NXN], Un[NN], u0, viol[NX], ok, stp, dd;
+  double R[NN + 1], VR[NN + 1], zm[NX], zp[NX];
+  /* the QP between prep and post */
+  double H[NZ * NZ], g[NZ], A[NC * NZ], lba[NC], uba[NC], lbx[NZ], ubx[NZ];
+  double hh[NXN], G[NXN * NN], Xs[NXN], Us[NN], dw[NZ];
+  /* DAQP's reduced QP: rows given (row-major), bounds, multipliers, sense */
+  double Ar[NC * NZ], bl[NW], bu[NW], lam[NW], ws[NW], Av[NC];
+  int sense[NW], sub[NC], in[NC];
+  double tphase[3], qps[3];
+  DAQPWorkspace work; DAQPSettings settings;
+} wb_fast_t;
+
+static double now(void) {
+  struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+int wb_fast_memory_size(void) { return M_SIZE; }
+int wb_fast_config_size(void) { return C_P + NP; }
+
+void wb_fast_free(wb_fast_t *h) {
+  if (!h) return;
+  if (h->mem[0] >= 0) { wb_nmpc_prep_release(h->mem[0]); wb_nmpc_prep_decref(); }
+  if (h->mem[1] >= 0) { wb_nmpc_post_release(h->mem[1]); wb_nmpc_post_decref(); }
+  free(h->arg); free(h->res); free(h->iw); free(h->w); free(h);
+}
+
+#define WB_MAX(a, b) ((a) > (b) ? (a) : (b))
+wb_fast_t *wb_fast_new(const double *cfg) {
+  casadi_int sz[2][4], na = 12, nr = 12, ni = 1, nw = 1; int k;
+  wb_fast_t *h = (wb_fast_t *)calloc(1, sizeof(wb_fast_t));
+  if (!h) return 0;
+  h->mem[0] = h->mem[1] = -1;
+  wb_nmpc_prep_work(&sz[0][0], &sz[0][1], &sz[0][2], &sz[0][3]);
+  wb_nmpc_post_work(&sz[1][0], &sz[1][1], &sz[1][2], &sz[1][3]);
+  for (k = 0; k < 2; ++k) {
+    na = WB_MAX(na, sz[k][0]); nr = WB_MAX(nr, sz[k][1]);
+    ni = WB_MAX(ni, sz[k][2]); nw = WB_MAX(nw, sz[k][3]);
+  }
+  h->arg = (const casadi_real **)malloc(sizeof(casadi_real *) * na);
+  h->res = (casadi_real **)malloc(sizeof(casadi_real *) * nr);
+  h->iw = (casadi_int *)malloc(sizeof(casadi_int) * ni);
+  h->w = (casadi_real *)malloc(sizeof(casadi_real) * nw);
+  wb_nmpc_prep_incref(); h->mem[0] = wb_nmpc_prep_checkout();
+  wb_nmpc_post_incref(); h->mem[1] = wb_nmpc_post_checkout();
+  if (!h->arg || !h->res || !h->iw || !h->w || h->mem[0] < 0 || h->mem[1] < 0) {
+    wb_fast_free(h); return 0;
+  }
+  memcpy(h->cfg, cfg, sizeof(double) * (C_P + NP));
+  daqp_default_settings(&h->settings);
+  return h;
+}
+
+/* ---- the QP (see workbench.controllers.mpc.fast_c) */
+
+/* the working set moved on by one node (the plan was shifted): the last node's kept */
+static void ws_shift(double *ws) {
+  int b, k, j;
+  for (k = 0; k < NN - 1; ++k) ws[k] = ws[k + 1];                /* the moves' bounds */
+  for (b = 0; b < NRN / NN; ++b) {
+    double *r = ws + NZ + b * NN;
+    for (k = 0; k < NN - 1; ++k) r[k] = r[k + 1];
+  }
+  if (MINT > 0) for (b = 0; b < (NC - NRN) / (NN * (MINT > 0 ? MINT : 1)); ++b) {
+    double *r = ws + NZ + NRN + b * NN * MINT;
+    for (k = 0; k < NN - 1; ++k) for (j = 0; j < MINT; ++j) r[k * MINT + j] = r[(k + 1) * MINT + j];
+  }
+}
+
+/* DAQP on the bounds and the rows h->sub[0..nsub), the working set h->ws marked active
+   (warm) or not; its exit flag (1: optimal), the step in h->dw, its working set in h->ws */
+static int qp_daqp(wb_fast_t *h, int nsub, int warm) {
+  DAQPProblem p; DAQPResult r; int i, j; c_float t;
+  for (i = 0; i < NZ; ++i) {
+    h->bl[i] = h->lbx[i]; h->bu[i] = h->ubx[i];
+    h->sense[i] = h->lbx[i] == h->ubx[i] ? 5 : !warm || h->ws[i] == 0.0 ? 0 : h->ws[i] > 0.0 ? 1 : 3;
+  }
+  for (j = 0; j < nsub; ++j) {
+    int row = h->sub[j]; double sg = h->ws[NZ + row];
+    for (i = 0; i < NZ; ++i) h->Ar[j * NZ + i] = h->A[row + NC * i];
+    h->bl[NZ + j] = h->lba[row]; h->bu[NZ + j] = h->uba[row];
+    h->sense[NZ + j] = h->lba[row] == h->uba[row] ? 5 : !warm || sg == 0.0 ? 0 : sg > 0.0 ? 1 : 3;
+  }
+  p.n = NZ; p.m = NZ + nsub; p.ms = NZ; p.H = h->H; p.f = h->g; p.A = h->Ar;
+  p.bupper = h->bu; p.blower = h->bl; p.sense = h->sense;
+  r.x = h->dw; r.lam = h->lam;
+  /* as CasADi's DAQP plugin calls it: a zeroed workspace (daqp_quadprog leaves some of
+     its stack workspace's pointers unset), our settings, freed after the solve */
+  memset(&h->work, 0, sizeof(h->work));
+  h->work.settings = &h->settings;
+  if (setup_daqp(&p, &h->work, &t) < 0) r.exitflag = -1;
+  else daqp_solve(&r, &h->work);
+  h->work.settings = 0;
+  free_daqp_workspace(&h->work);
+  free_daqp_ldp(&h->work);
+  h->qps[0] += 1.0; h->qps[1] += nsub;
+  if (r.exitflag == 1) {                 /* the working set of this solution */
+    for (i = 0; i < NZ; ++i) h->ws[i] = h->lam[i] > 0.0 ? 1.0 : h->lam[i] < 0.0 ? -1.0 : 0.0;
+    for (j = 0; j < NC; ++j) h->ws[NZ + j] = 0.0;
+    for (j = 0; j < nsub; ++j) {
+      double l = h->lam[NZ + j];
+      h->ws[NZ + h->sub[j]] = l > 0.0 ? 1.0 : l < 0.0 ? -1.0 : 0.0;
+    }
+  }
+  return r.exitflag;
+}
+
+/* the rows left out that the step h->dw violates join the rows given; how many joined */
+static int qp_violated(wb_fast_t *h, int *nsub) {
+  int i, j, added = 0;
+  for (j = 0; j < NC; ++j) h->Av[j] = 0.0;
+  for (i = 0; i < NZ; ++i) {
+    const double *a = h->A + NC * i; double x = h->dw[i];
+    for (j = 0; j < NC; ++j) h->Av[j] += a[j] * x;
+  }
+  for (j = 0; j < NC; ++j) {
+    if (h->in[j]) continue;
+    if (h->Av[j] < h->lba[j] - QP_TOL) h->ws[NZ + j] = -1.0;
+    else if (h->Av[j] > h->uba[j] + QP_TOL) h->ws[NZ + j] = 1.0;
+    else continue;
+    h->in[j] = 1; h->sub[(*nsub)++] = j; ++added;
+  }
+  return added;
+}
+
+/* the condensed QP from the working set h->ws (see the module text): 1 on success */
+static int qp(wb_fast_t *h) {
+  int j, nsub = 0, round;
+  for (j = 0; j < NC; ++j) {
+    h->in[j] = h->ws[NZ + j] != 0.0;
+    if (h->in[j]) h->sub[nsub++] = j;
+  }
+  for (round = 0; round < QP_ROUNDS; ++round) {
+    if (qp_daqp(h, nsub, QP_WARM) != 1 && qp_daqp(h, nsub, 0) != 1) break;
+    if (!qp_violated(h, &nsub)) return 1;
+  }
+  /* the full QP, cold */
+  h->qps[2] += 1.0;
+  for (j = 0; j < NC; ++j) { h->sub[j] = j; h->in[j] = 1; }
+  return qp_daqp(h, NC, 0) == 1;
+}
+
+/* one Gauss-Newton step from h->X, h->U (qp.sqp_step: prep, QP, post, each timed);
+   1 on success (then h->Xn, h->Un are the plan) */
+static int step(wb_fast_t *h, double sh, double up, double dprev, double est) {
+  int i; double t0 = now(), t1, t2;
+  const double *a[11];
+  a[0] = h->X; a[1] = h->U; a[2] = &sh; a[3] = h->zm; a[4] = h->R; a[5] = h->VR; a[6] = &up;
+  a[7] = h->zp; a[8] = &dprev; a[9] = &est; a[10] = h->cfg + C_P;
+  for (i = 0; i < 11; ++i) h->arg[i] = a[i];
+  h->res[0] = h->H; h->res[1] = h->g; h->res[2] = h->A; h->res[3] = h->lba;
+  h->res[4] = h->uba; h->res[5] = h->lbx; h->res[6] = h->ubx; h->res[7] = h->hh;
+  h->res[8] = h->G; h->res[9] = h->Xs; h->res[10] = h->Us; h->res[11] = &h->dd;
+  if (wb_nmpc_prep(h->arg, h->res, h->iw, h->w, h->mem[0])) return 0;
+  t1 = now();
+  if (sh != 0.0) ws_shift(h->ws);
+  if (!qp(h)) { memset(h->ws, 0, sizeof(h->ws)); return 0; }
+  t2 = now();
+  h->arg[0] = h->Xs; h->arg[1] = h->Us; h->arg[2] = h->hh; h->arg[3] = h->G;
+  h->arg[4] = h->dw; h->arg[5] = h->cfg + C_P;
+  h->res[0] = h->Xn; h->res[1] = h->Un; h->res[2] = &h->u0; h->res[3] = h->viol;
+  h->res[4] = &h->ok; h->res[5] = &h->stp;
+  if (wb_nmpc_post(h->arg, h->res, h->iw, h->w, h->mem[1])) return 0;
+  h->tphase[0] += t1 - t0; h->tphase[1] += t2 - t1; h->tphase[2] += now() - t2;
+  return h->ok != 0.0;
+}
+
+/* up to iters steps (update.py's _sqp): the estimate is updated in the first only */
+static int sqp(wb_fast_t *h, int shift, double up, double *dprev, double *est, int iters,
+               double *d, int *ok) {
+  int it; double sh = shift ? 1.0 : 0.0;
+  *ok = 0; *d = *dprev;
+  for (it = 1; it <= iters; ++it) {
+    *ok = step(h, sh, up, *dprev, *est);
+    if (it == 1) { *d = *dprev = h->dd; *est = 0.0; }
+    if (!*ok) break;
+    memcpy(h->X, h->Xn, sizeof(double) * NXN); memcpy(h->U, h->Un, sizeof(double) * NN);
+    sh = 0.0;
+    if (h->stp < h->cfg[C_tol]) break;
+  }
+  return it > iters ? iters : it;
+}
+
+static void cold(wb_fast_t *h) {
+  int k, i;
+  for (k = 0; k <= NN; ++k) for (i = 0; i < NX; ++i) h->X[i + NX * k] = h->zm[i];
+  for (k = 0; k < NN; ++k) h->U[k] = 0.0;
+  memset(h->ws, 0, sizeof(h->ws));
+}
+
+/* the node reference (update.node_reference without preview, then admissible) */
+static void reference(wb_fast_t *h, double r, int started, double r_prev) {
+  const double *c = h->cfg; int k;
+  double T = c[C_T], rate = started ? (r - r_prev) / T : 0.0;
+  if (!(fabs(rate) <= c[C_rate_limit])) rate = 0.0;
+  for (k = 0; k <= NN; ++k) {
+    double R = r + rate * T * (double)k, VR = rate;
+    if (R < c[C_r_lo] || R > c[C_r_hi]) VR = 0.0;
+    R = R < c[C_r_lo] ? c[C_r_lo] : R;
+    R = R > c[C_r_hi] ? c[C_r_hi] : R;
+    h->R[k] = R / c[C_L]; h->VR[k] = VR / c[C_v_scale];
+  }
+}
+
+/* one sample: memory m updated in place, command (V) in *u; returns 1 on success.
+   RV: the node reference given (scaled position, then velocity, N + 1 each: the
+   preview, made by the caller) or 0 (extrapolated from r here) */
+int wb_fast_sample_ref(wb_fast_t *h, double *m, const double *y, double r, const double *RV,
+                       double *u) {
+  const double *c = h->cfg; struct timespec t0, t1;
+  int started = m[M_STARTED] != 0.0, warm, ok = 0, restarted = 0, it = 0, i, k, iters;
+  double up, dprev, est, d;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  h->qps[0] = h->qps[1] = h->qps[2] = 0.0;
+  for (i = 0; i < NX; ++i) h->zm[i] = y[i] / c[C_sx0 + i];
+  if (RV) {
+    memcpy(h->R, RV, sizeof(double) * (NN + 1)); memcpy(h->VR, RV + NN + 1, sizeof(double) * (NN + 1));
+  } else reference(h, r, started, m[M_RPREV]);
+  if (started) {
+    up = m[M_UPREV]; dprev = m[M_D]; est = 1.0;
+    for (i = 0; i < NX; ++i) h->zp[i] = m[M_Z + i];
+  } else {
+    up = 0.0; dprev = 0.0; est = 0.0;
+    for (i = 0; i < NX; ++i) h->zp[i] = h->zm[i];
+  }
+  d = dprev;
+  warm = started && c[C_warm] != 0.0;
+  if (warm) {
+    memcpy(h->X, m + M_X, sizeof(double) * NXN); memcpy(h->U, m + M_U, sizeof(double) * NN);
+    memcpy(h->ws, m + M_WS, sizeof(double) * NW);
+    it = sqp(h, 1, up, &dprev, &est, c[C_rti] != 0.0 ? 1 : (int)c[C_max_it], &d, &ok);
+  }
+  if (!ok) {
+    restarted = warm;
+    iters = (!started || c[C_rti] == 0.0 || restarted) ? (int)c[C_max_it] : 1;
+    cold(h);
+    it = sqp(h, 0, up, &dprev, &est, iters, &d, &ok);
+  }
+  if (!ok) {                              /* the previous plan, shifted (or rest) */
+    if (!started) cold(h);
+    else {
+      for (k = 0; k < NN; ++k) for (i = 0; i < NX; ++i) h->X[i + NX * k] = m[M_X + i + NX * (k + 1)];
+      for (i = 0; i < NX; ++i) h->X[i + NX * NN] = m[M_X + i + NX * NN];
+      for (k = 0; k < NN - 1; ++k) h->U[k] = m[M_U + k + 1];
+      h->U[NN - 1] = m[M_U + NN - 1];
+    }
+    memset(h->ws, 0, sizeof(h->ws));
+  }
+  memcpy(m + M_X, h->X, sizeof(double) * NXN); memcpy(m + M_U, h->U, sizeof(double) * NN);
+  memcpy(m + M_WS, h->ws, sizeof(double) * NW);
+  m[M_UPREV] = h->U[0]; m[M_RPREV] = r; m[M_D] = d;
+  m[M_T] = started ? m[M_T] + c[C_T] : 0.0;
+  for (i = 0; i < NX; ++i) { m[M_Z + i] = h->zm[i]; m[M_VIOL + i] = ok ? h->viol[i] : 0.0; }
+  m[M_STARTED] = 1.0; m[M_IT] = it; m[M_OK] = ok; m[M_RESTARTED] = restarted;
+  *u = c[C_u_c] + c[C_u_s] * h->U[0];
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  m[M_TIME] = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+  for (i = 0; i < 3; ++i) { m[M_TPHASE + i] = h->tphase[i]; h->tphase[i] = 0.0; }
+  m[M_TPHASE + 3] += 1.0;
+  for (i = 0; i < 3; ++i) m[M_QPS + i] = h->qps[i];
+  return ok;
+}
+
+int wb_fast_sample(wb_fast_t *h, double *m, const double *y, double r, double *u) {
+  return wb_fast_sample_ref(h, m, y, r, 0, u);
+}
+"""
