@@ -115,6 +115,23 @@ def test_compiled_sample_follows_a_preview(rig25, nmpc):
     assert np.all(rows < 40 * calls)
 
 
+def test_compiled_sample_with_limits_between_the_nodes(rig25, nmpc):
+    # limits also at the RK4 substep between two nodes: the driver condenses with the
+    # generated qp.condense (its interior rows), not its own loop; two substeps
+    il = nmpc.with_settings(interior_limits=True, substeps=2)
+    counts = []
+    assert _compare(rig25, CompiledNMPC(il), il, 140, counts) <= 1e-8
+    assert np.array(counts)[:, 1].sum() > 0                 # limits were active
+
+
+def test_compiled_sample_without_a_speed_limit(rig25, nmpc):
+    # three soft limits (stroke, p_a, p_b) instead of four: the driver's condensing
+    # reads the soft limits and the settings' layout from the problem
+    free = nmpc.with_settings(max_speed=None)
+    assert free._problem.ns == 2 and len(free._problem.soft) == 3
+    assert _compare(rig25, CompiledNMPC(free), free, 140) <= 1e-8
+
+
 def test_plans_stay_inside_the_command_range(rig25, nmpc, fast):
     # the model clips the spool at the command limits (sensitivity 1 inside, 0.5 at
     # the limit): a plan at the limit is kept INSIDE it, so that its linearisation does
@@ -140,8 +157,8 @@ def test_compiled_memory_reports_the_last_sample(rig25, fast):
     assert u == pytest.approx(fast.pb.u_c + fast.pb.u_s * mem.U[0], rel=1e-14)
     assert mem.r_prev == 0.25 and mem.t == 0.0
     # the phases are timed inside the sample: each > 0, together within the sample
-    prep, qp, post, whole = mem.phase_times()
-    assert min(prep, qp, post) > 0.0 and prep + qp + post <= whole
+    lin, cond, qp, post, whole = mem.phase_times()
+    assert min(lin, cond, qp, post) > 0.0 and lin + cond + qp + post <= whole
     mem2, _ = fast.update(mem, 0.25, y)
     assert mem2 is mem and mem.t == pytest.approx(0.01)
     with pytest.raises(InputError, match="p_b"):

@@ -183,11 +183,15 @@ def _alone(plant, mine: dict, nmpc, ref, duration: float, plain_from) -> dict:
 
 
 def phase_medians(run: dict) -> dict[str, float]:
-    """us, medians over the run's samples of the compiled sample's phases (prep, QP,
-    post, the whole sample in C) and of the update as Python saw it (``update``)."""
-    ph = 1e6 * np.median(np.asarray(run["phases"]), axis=0)
-    return {"prep": float(ph[0]), "qp": float(ph[1]), "post": float(ph[2]),
-            "sample_in_c": float(ph[3]), "update": 1e6 * float(np.median(run["wall"]))}
+    """us, medians over the run's samples of the compiled sample's phases (the
+    linearisation ``lin``: shift, estimate, interval maps; ``condense``; ``prep``: the
+    two; the QP; post; the whole sample in C) and of the update as Python saw it
+    (``update``)."""
+    ph = np.asarray(run["phases"])
+    ph = 1e6 * np.median(np.column_stack([ph[:, 0] + ph[:, 1], ph]), axis=0)
+    return {"prep": float(ph[0]), "lin": float(ph[1]), "condense": float(ph[2]),
+            "qp": float(ph[3]), "post": float(ph[4]), "sample_in_c": float(ph[5]),
+            "update": 1e6 * float(np.median(run["wall"]))}
 
 
 def _compiled(ctrls: dict, jit: bool) -> tuple[dict, str | None]:

@@ -44,7 +44,7 @@ from ...integrate.jit import (CompileError, cache_dir, have_compiler, shared_lib
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
 from .fast_c import CONFIG, DRIVER
-from .qp import apply_step, prepare
+from .qp import apply_step, condense, intervals
 from .results import StepInfo
 
 __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
@@ -81,10 +81,11 @@ def _daqp_paths() -> tuple[str, str] | None:
 
 
 def _source(pb) -> str:
-    """The generated prep and post followed by the driver (which calls DAQP itself)."""
+    """The generated interval linearisation and post (and the condensing, with limits
+    between the nodes) followed by the driver (which condenses and calls DAQP)."""
     nz, nc = pb.N + pb.ns, pb.n_rows
-    funs = (prepare(pb), apply_step(pb))
-    _check_layout(*funs, nz, nc)
+    funs = [intervals(pb), apply_step(pb)] + ([condense(pb)] if pb.m_int else [])
+    _check_layout(pb, *funs[:2])
     with tempfile.TemporaryDirectory(prefix="wb_fast_") as tmp:
         gen = ca.CodeGenerator("wb_fast.c", {"with_header": False})
         for f in funs:
@@ -92,27 +93,46 @@ def _source(pb) -> str:
         gen.generate(tmp + os.sep)
         generated = Path(tmp, "wb_fast.c").read_text()
     cfg = "\n".join(f"#define C_{k} {i}" for i, k in enumerate(CONFIG))
-    n_node = 2 * pb.N * len(pb.soft)
-    return generated + DRIVER % {"N": pb.N, "NP": pb.P.size, "CFG": cfg, "NCFG": len(CONFIG),
-                                 "NZ": nz, "NC": nc, "NRN": n_node, "MINT": pb.m_int,
-                                 "QP_TOL": QP_TOL, "QP_ROUNDS": QP_ROUNDS,
-                                 "QP_WARM": int(QP_WARM)}
+    return generated + DRIVER % {
+        "N": pb.N, "NP": pb.P.size, "CFG": cfg, "NCFG": len(CONFIG), "NZ": nz, "NC": nc,
+        "NRN": 2 * pb.N * len(pb.soft), "MINT": pb.m_int, "QP_TOL": QP_TOL,
+        "QP_ROUNDS": QP_ROUNDS, "QP_WARM": int(QP_WARM), **_settings_layout(pb),
+        "NSOFT": len(pb.soft), "SOFT_I": ", ".join(str(i) for i, _ in pb.soft),
+        "SOFT_J": ", ".join(str(j) for _, j in pb.soft), "W_LO": float(pb.w_lo),
+        "W_HI": float(pb.w_hi)}
 
 
-def _check_layout(prep, post, nz: int, nc: int) -> None:
-    """The driver passes prep's outputs to DAQP and to post as dense buffers of the
-    condensed QP's sizes: refuse a problem whose functions no longer fit that (rather
-    than compute nonsense)."""
-    shapes = [(nz, nz), (nz, 1), (nc, nz), (nc, 1), (nc, 1), (nz, 1), (nz, 1)]
-    pairs = [(prep.sparsity_out(a), post.sparsity_in(b))
-             for a, b in ((9, 0), (10, 1), (7, 2), (8, 3))]
-    dense = [prep.sparsity_out(i) for i in range(prep.n_out())]
+def _settings_layout(pb) -> dict[str, int]:
+    """Offsets of the cost weights and limits in the settings vector P, read from
+    :meth:`Problem.unpack` (the driver's condensing indexes P by them)."""
+    idx = pb.unpack(np.arange(pb.P.size))
+    names = ("P_WX", "P_WV", "P_WDU", "P_RHO1", "P_RHO2", "P_LO", "P_HI")
+    sizes = (pb.N, pb.N, 1, 1, 1, pb.nx, pb.nx)
+    out = {}
+    for name, part, n in zip(names, idx, sizes):
+        part = np.atleast_1d(part)
+        if part.size != n or np.any(np.diff(part) != 1):
+            raise CompileError("the NMPC's settings vector changed its layout; the compiled "
+                               "sample's condensing (controllers.mpc.fast_c) must follow")
+        out[name] = int(part[0])
+    return out
+
+
+def _check_layout(pb, lin, post) -> None:
+    """The driver passes the linearisation's outputs to its condensing and to post as
+    dense buffers of the condensed QP's sizes: refuse a problem whose functions no
+    longer fit that (rather than compute nonsense)."""
+    N, nx, m = pb.N, pb.nx, pb.m_int
+    shapes = [(nx, N + 1), (1, N), (1, 1), (nx, nx * N), (nx, N), (nx, N), (nx, 1)]
+    shapes += [(nx, N * m), (nx, nx * N * m), (nx, N * m)] if m else []
+    post_in = [(nx, N + 1), (1, N), (nx, N + 1), (nx * (N + 1), N), (N + pb.ns, 1)]
+    dense = [lin.sparsity_out(i) for i in range(lin.n_out())]
     dense += [post.sparsity_out(i) for i in range(post.n_out())]
-    if (prep.n_out() != 12 or post.n_out() != 6 or any(a != b for a, b in pairs)
-            or any(prep.sparsity_out(i).shape != s for i, s in enumerate(shapes))
-            or post.sparsity_in(4).shape != (nz, 1)
+    if (lin.n_out() != len(shapes) or post.n_out() != 6
+            or any(lin.sparsity_out(i).shape != s for i, s in enumerate(shapes))
+            or any(post.sparsity_in(i).shape != s for i, s in enumerate(post_in))
             or not all(sp.is_dense() for sp in dense)):
-        raise CompileError("the NMPC's prep / post functions changed their layout; "
+        raise CompileError("the NMPC's linearisation / post functions changed their layout; "
                            "the compiled sample's driver (controllers.mpc.fast) must follow")
 
 
@@ -136,7 +156,7 @@ class CompiledMemory:
         n = 4 * (self.N + 1)
         return {"u_prev": n + self.N, "r_prev": n + self.N + 1, "z": n + self.N + 2,
                 "d": n + self.N + 6, "t": n + self.N + 7, "it": n + self.N + 9,
-                "qps": n + self.N + 9 + 12, "ws": n + self.N + 9 + 15}[name]
+                "qps": n + self.N + 9 + 13, "ws": n + self.N + 9 + 16}[name]
 
     @property
     def X(self) -> np.ndarray:
@@ -153,13 +173,13 @@ class CompiledMemory:
     d = property(lambda self: float(self.buf[self._at("d")]))
     t = property(lambda self: float(self.buf[self._at("t")]))
 
-    def phase_times(self) -> tuple[float, float, float, float]:
-        """s (wall) of the last sample: the compiled prep (shift, estimate, interval
-        maps, condensing), the QP (DAQP), post (plan update), each summed over the
+    def phase_times(self) -> tuple[float, float, float, float, float]:
+        """s (wall) of the last sample: the linearisation (shift, estimate, interval
+        maps), the condensing, the QP (DAQP), post (plan update), each summed over the
         sample's Gauss-Newton steps, and the whole sample in C."""
         i = self._at("it") + 8
-        t = self.buf[i:i + 3]
-        return float(t[0]), float(t[1]), float(t[2]), float(self.buf[i - 1])
+        t = self.buf[i:i + 4]
+        return float(t[0]), float(t[1]), float(t[2]), float(t[3]), float(self.buf[i - 1])
 
     @property
     def working_set(self) -> np.ndarray:

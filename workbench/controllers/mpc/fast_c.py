@@ -53,11 +53,25 @@ DRIVER = r"""
 #define NRN %(NRN)d      /* node rows: NRN / NN blocks of NN rows, node by node */
 #define MINT %(MINT)d    /* then interior rows: blocks of NN MINT rows, MINT per node */
 #define NW (NZ + NC)     /* working set: the bounds, then the rows */
+#define NZI (NX * NN * MINT + 1)  /* interior points' states (+1: never empty) */
 #define QP_TOL %(QP_TOL)r
 #define QP_ROUNDS %(QP_ROUNDS)d
 #define QP_WARM %(QP_WARM)d
 %(CFG)s
 #define C_P %(NCFG)d
+/* the condensed QP (qp.condense): settings P's layout (Problem.unpack), soft limits
+   (state index, slack index), the scaled command range */
+#define P_WX %(P_WX)d
+#define P_WV %(P_WV)d
+#define P_WDU %(P_WDU)d
+#define P_RHO1 %(P_RHO1)d
+#define P_RHO2 %(P_RHO2)d
+#define P_LO %(P_LO)d
+#define P_HI %(P_HI)d
+#define NSOFT %(NSOFT)d
+static const int SOFT_I[NSOFT] = {%(SOFT_I)s}, SOFT_J[NSOFT] = {%(SOFT_J)s};
+#define W_LO %(W_LO)r
+#define W_HI %(W_HI)r
 /* memory layout */
 #define M_X 0
 #define M_U (M_X + NXN)
@@ -72,24 +86,27 @@ DRIVER = r"""
 #define M_RESTARTED (M_OK + 1)
 #define M_VIOL (M_RESTARTED + 1)
 #define M_TIME (M_VIOL + NX)
-#define M_TPHASE (M_TIME + 1)   /* s, of the last sample: prep, QP, post; then samples */
-#define M_QPS (M_TPHASE + 4)    /* DAQP calls, rows given to DAQP, cold fallbacks: last sample */
+#define M_TPHASE (M_TIME + 1)   /* s, last sample: lin, condense, QP, post; then samples */
+#define M_QPS (M_TPHASE + 5)    /* DAQP calls, rows given to DAQP, cold fallbacks: last sample */
 #define M_WS (M_QPS + 3)        /* working set of the last QP: +1 upper, -1 lower, 0 */
 #define M_SIZE (M_WS + NW)
 
 typedef struct {
   const casadi_real **arg; casadi_real **res; casadi_int *iw; casadi_real *w;
-  int mem[2];
+  int mem[3];
   double cfg[C_P + NP];
   double X[NXN], U[NN], Xn[NXN], Un[NN], u0, viol[NX], ok, stp, dd;
   double R[NN + 1], VR[NN + 1], zm[NX], zp[NX];
   /* the QP between prep and post */
   double H[NZ * NZ], g[NZ], A[NC * NZ], lba[NC], uba[NC], lbx[NZ], ubx[NZ];
   double hh[NXN], G[NXN * NN], Xs[NXN], Us[NN], dw[NZ];
+  /* the plan linearised (qp.intervals) */
+  double Aj[NX * NX * NN], Bj[NX * NN], cdef[NX * NN], dz0[NX];
+  double Zi[NZI], Ai[NZI * NX], Bi[NZI];
   /* DAQP's reduced QP: rows given (row-major), bounds, multipliers, sense */
   double Ar[NC * NZ], bl[NW], bu[NW], lam[NW], ws[NW], Av[NC];
   int sense[NW], sub[NC], in[NC];
-  double tphase[3], qps[3];
+  double tphase[4], qps[3];
   DAQPWorkspace work; DAQPSettings settings;
 } wb_fast_t;
 
@@ -103,20 +120,26 @@ int wb_fast_config_size(void) { return C_P + NP; }
 
 void wb_fast_free(wb_fast_t *h) {
   if (!h) return;
-  if (h->mem[0] >= 0) { wb_nmpc_prep_release(h->mem[0]); wb_nmpc_prep_decref(); }
+  if (h->mem[0] >= 0) { wb_nmpc_lin_release(h->mem[0]); wb_nmpc_lin_decref(); }
   if (h->mem[1] >= 0) { wb_nmpc_post_release(h->mem[1]); wb_nmpc_post_decref(); }
+#if MINT > 0
+  if (h->mem[2] >= 0) { wb_nmpc_condense_release(h->mem[2]); wb_nmpc_condense_decref(); }
+#endif
   free(h->arg); free(h->res); free(h->iw); free(h->w); free(h);
 }
 
 #define WB_MAX(a, b) ((a) > (b) ? (a) : (b))
 wb_fast_t *wb_fast_new(const double *cfg) {
-  casadi_int sz[2][4], na = 12, nr = 12, ni = 1, nw = 1; int k;
+  casadi_int sz[3][4] = {{0}}, na = 13, nr = 12, ni = 1, nw = 1; int k;
   wb_fast_t *h = (wb_fast_t *)calloc(1, sizeof(wb_fast_t));
   if (!h) return 0;
-  h->mem[0] = h->mem[1] = -1;
-  wb_nmpc_prep_work(&sz[0][0], &sz[0][1], &sz[0][2], &sz[0][3]);
+  h->mem[0] = h->mem[1] = h->mem[2] = -1;
+  wb_nmpc_lin_work(&sz[0][0], &sz[0][1], &sz[0][2], &sz[0][3]);
   wb_nmpc_post_work(&sz[1][0], &sz[1][1], &sz[1][2], &sz[1][3]);
-  for (k = 0; k < 2; ++k) {
+#if MINT > 0
+  wb_nmpc_condense_work(&sz[2][0], &sz[2][1], &sz[2][2], &sz[2][3]);
+#endif
+  for (k = 0; k < 3; ++k) {
     na = WB_MAX(na, sz[k][0]); nr = WB_MAX(nr, sz[k][1]);
     ni = WB_MAX(ni, sz[k][2]); nw = WB_MAX(nw, sz[k][3]);
   }
@@ -124,8 +147,12 @@ wb_fast_t *wb_fast_new(const double *cfg) {
   h->res = (casadi_real **)malloc(sizeof(casadi_real *) * nr);
   h->iw = (casadi_int *)malloc(sizeof(casadi_int) * ni);
   h->w = (casadi_real *)malloc(sizeof(casadi_real) * nw);
-  wb_nmpc_prep_incref(); h->mem[0] = wb_nmpc_prep_checkout();
+  wb_nmpc_lin_incref(); h->mem[0] = wb_nmpc_lin_checkout();
   wb_nmpc_post_incref(); h->mem[1] = wb_nmpc_post_checkout();
+#if MINT > 0
+  wb_nmpc_condense_incref(); h->mem[2] = wb_nmpc_condense_checkout();
+  if (h->mem[2] < 0) { wb_fast_free(h); return 0; }
+#endif
   if (!h->arg || !h->res || !h->iw || !h->w || h->mem[0] < 0 || h->mem[1] < 0) {
     wb_fast_free(h); return 0;
   }
@@ -223,28 +250,130 @@ static int qp(wb_fast_t *h) {
   return qp_daqp(h, NC, 0) == 1;
 }
 
-/* one Gauss-Newton step from h->X, h->U (qp.sqp_step: prep, QP, post, each timed);
-   1 on success (then h->Xn, h->Un are the plan) */
-static int step(wb_fast_t *h, double sh, double up, double dprev, double est) {
-  int i; double t0 = now(), t1, t2;
-  const double *a[11];
-  a[0] = h->X; a[1] = h->U; a[2] = &sh; a[3] = h->zm; a[4] = h->R; a[5] = h->VR; a[6] = &up;
-  a[7] = h->zp; a[8] = &dprev; a[9] = &est; a[10] = h->cfg + C_P;
-  for (i = 0; i < 11; ++i) h->arg[i] = a[i];
+/* ---- the condensed QP (qp.condense without limits between the nodes) */
+#define NG NXN    /* rows of G: the node corrections' sensitivities, node by node */
+/* S_i(k, j): node k + 1's state i by move j (zero for j > k) */
+#define S_(i, k, j) h->G[NX * ((k) + 1) + (i) + NG * (j)]
+
+/* node corrections at zero moves h_k and their sensitivities G_k to the moves, by the
+   linearised dynamics dz_{k+1} = A_k dz_k + B_k dw_k + c_k from dz_0 */
+static void condense_nodes(wb_fast_t *h) {
+  int k, i, j, l;
+  memset(h->G, 0, sizeof(h->G));
+  for (i = 0; i < NX; ++i) h->hh[i] = h->dz0[i];
+  for (k = 0; k < NN; ++k) {
+    const double *Ak = h->Aj + NX * NX * k, *hk = h->hh + NX * k;
+    for (i = 0; i < NX; ++i) {
+      double s = 0.0;
+      for (l = 0; l < NX; ++l) s += Ak[i + NX * l] * hk[l];
+      h->hh[NX * (k + 1) + i] = s + h->cdef[i + NX * k];
+    }
+    for (j = 0; j < k; ++j) {
+      const double *gk = h->G + NX * k + NG * j; double *gn = h->G + NX * (k + 1) + NG * j;
+      for (i = 0; i < NX; ++i) {
+        double s = 0.0;
+        for (l = 0; l < NX; ++l) s += Ak[i + NX * l] * gk[l];
+        gn[i] = s;
+      }
+    }
+    for (i = 0; i < NX; ++i) h->G[NX * (k + 1) + i + NG * k] = h->Bj[i + NX * k];
+  }
+}
+
+/* the cost: H = diag(S0' Wx S0 + S1' Wv S1 + wdu D'D, rho2 I), g (S: lower triangular,
+   so node k + 1 sums only over moves up to k) */
+static void condense_cost(wb_fast_t *h, double up) {
+  const double *P = h->cfg + C_P, *wx = P + P_WX, *wv = P + P_WV;
+  double wdu = P[P_WDU], ex[NN], ev[NN], m[NN];
+  int k, j, l;
+  memset(h->H, 0, sizeof(h->H));
+  for (k = 0; k < NN; ++k) {
+    ex[k] = wx[k] * (h->Xs[NX * (k + 1)] + h->hh[NX * (k + 1)] - h->R[k + 1]);
+    ev[k] = wv[k] * (h->Xs[NX * (k + 1) + 1] + h->hh[NX * (k + 1) + 1] - h->VR[k + 1]);
+    m[k] = h->Us[k] - (k ? h->Us[k - 1] : up);
+  }
+  for (j = 0; j < NN; ++j) {
+    double gj = 0.0;
+    for (l = j; l < NN; ++l) {
+      double s = 0.0;
+      for (k = l; k < NN; ++k) s += wx[k] * S_(0, k, j) * S_(0, k, l) + wv[k] * S_(1, k, j) * S_(1, k, l);
+      h->H[j + NZ * l] = h->H[l + NZ * j] = s;
+    }
+    for (k = j; k < NN; ++k) gj += S_(0, k, j) * ex[k] + S_(1, k, j) * ev[k];
+    h->g[j] = gj + wdu * (m[j] - (j + 1 < NN ? m[j + 1] : 0.0));
+    h->H[j + NZ * j] += wdu * (j + 1 < NN ? 2.0 : 1.0);
+    if (j + 1 < NN) { h->H[j + NZ * (j + 1)] -= wdu; h->H[j + 1 + NZ * j] -= wdu; }
+  }
+  for (j = NN; j < NZ; ++j) { h->H[j + NZ * j] = P[P_RHO2]; h->g[j] = P[P_RHO1]; }
+}
+
+/* the rows: per soft limit (i, slack j) lo_i - x_i <= S_i dw + s_j and
+   S_i dw - s_j <= hi_i - x_i at nodes 1..N; the bounds of the moves and slacks */
+static void condense_rows(wb_fast_t *h) {
+  const double *P = h->cfg + C_P;
+  int b, k, j, c;
+  for (b = 0; b < NSOFT; ++b) {
+    int i = SOFT_I[b], r0 = 2 * b * NN, r1 = (2 * b + 1) * NN;
+    for (k = 0; k < NN; ++k) {
+      double x = h->Xs[NX * (k + 1) + i] + h->hh[NX * (k + 1) + i];
+      for (j = 0; j < NN; ++j) h->A[r0 + k + NC * j] = h->A[r1 + k + NC * j] = S_(i, k, j);
+      for (c = 0; c < NZ - NN; ++c) {
+        h->A[r0 + k + NC * (NN + c)] = c == SOFT_J[b] ? 1.0 : 0.0;
+        h->A[r1 + k + NC * (NN + c)] = c == SOFT_J[b] ? -1.0 : 0.0;
+      }
+      h->lba[r0 + k] = P[P_LO + i] - x; h->uba[r0 + k] = INFINITY;
+      h->lba[r1 + k] = -INFINITY; h->uba[r1 + k] = P[P_HI + i] - x;
+    }
+  }
+  for (j = 0; j < NN; ++j) { h->lbx[j] = W_LO - h->Us[j]; h->ubx[j] = W_HI - h->Us[j]; }
+  for (j = NN; j < NZ; ++j) { h->lbx[j] = 0.0; h->ubx[j] = INFINITY; }
+}
+
+/* the condensed QP of the linearised plan: here, or (limits between the nodes too)
+   the generated qp.condense; 0 on success */
+static int condense(wb_fast_t *h, double up) {
+#if MINT > 0
+  int i;
+  const double *a[13];
+  a[0] = h->Aj; a[1] = h->Bj; a[2] = h->cdef; a[3] = h->dz0; a[4] = h->Xs; a[5] = h->Us;
+  a[6] = h->R; a[7] = h->VR; a[8] = &up; a[9] = h->cfg + C_P; a[10] = h->Zi; a[11] = h->Ai;
+  a[12] = h->Bi;
+  for (i = 0; i < 13; ++i) h->arg[i] = a[i];
   h->res[0] = h->H; h->res[1] = h->g; h->res[2] = h->A; h->res[3] = h->lba;
   h->res[4] = h->uba; h->res[5] = h->lbx; h->res[6] = h->ubx; h->res[7] = h->hh;
-  h->res[8] = h->G; h->res[9] = h->Xs; h->res[10] = h->Us; h->res[11] = &h->dd;
-  if (wb_nmpc_prep(h->arg, h->res, h->iw, h->w, h->mem[0])) return 0;
+  h->res[8] = h->G;
+  return wb_nmpc_condense(h->arg, h->res, h->iw, h->w, h->mem[2]);
+#else
+  condense_nodes(h); condense_cost(h, up); condense_rows(h);
+  return 0;
+#endif
+}
+
+/* one Gauss-Newton step from h->X, h->U (qp.sqp_step: linearise, condense, QP, post,
+   each timed); 1 on success (then h->Xn, h->Un are the plan) */
+static int step(wb_fast_t *h, double sh, double up, double dprev, double est) {
+  int i; double t0 = now(), t1, t2, t3;
+  const double *a[9];
+  a[0] = h->X; a[1] = h->U; a[2] = &sh; a[3] = h->zm; a[4] = &up; a[5] = h->zp;
+  a[6] = &dprev; a[7] = &est; a[8] = h->cfg + C_P;
+  for (i = 0; i < 9; ++i) h->arg[i] = a[i];
+  h->res[0] = h->Xs; h->res[1] = h->Us; h->res[2] = &h->dd; h->res[3] = h->Aj;
+  h->res[4] = h->Bj; h->res[5] = h->cdef; h->res[6] = h->dz0; h->res[7] = h->Zi;
+  h->res[8] = h->Ai; h->res[9] = h->Bi;
+  if (wb_nmpc_lin(h->arg, h->res, h->iw, h->w, h->mem[0])) return 0;
   t1 = now();
+  if (condense(h, up)) return 0;
+  t2 = now();
   if (sh != 0.0) ws_shift(h->ws);
   if (!qp(h)) { memset(h->ws, 0, sizeof(h->ws)); return 0; }
-  t2 = now();
+  t3 = now();
   h->arg[0] = h->Xs; h->arg[1] = h->Us; h->arg[2] = h->hh; h->arg[3] = h->G;
   h->arg[4] = h->dw; h->arg[5] = h->cfg + C_P;
   h->res[0] = h->Xn; h->res[1] = h->Un; h->res[2] = &h->u0; h->res[3] = h->viol;
   h->res[4] = &h->ok; h->res[5] = &h->stp;
   if (wb_nmpc_post(h->arg, h->res, h->iw, h->w, h->mem[1])) return 0;
-  h->tphase[0] += t1 - t0; h->tphase[1] += t2 - t1; h->tphase[2] += now() - t2;
+  h->tphase[0] += t1 - t0; h->tphase[1] += t2 - t1; h->tphase[2] += t3 - t2;
+  h->tphase[3] += now() - t3;
   return h->ok != 0.0;
 }
 
@@ -338,8 +467,8 @@ int wb_fast_sample_ref(wb_fast_t *h, double *m, const double *y, double r, const
   *u = c[C_u_c] + c[C_u_s] * h->U[0];
   clock_gettime(CLOCK_MONOTONIC, &t1);
   m[M_TIME] = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
-  for (i = 0; i < 3; ++i) { m[M_TPHASE + i] = h->tphase[i]; h->tphase[i] = 0.0; }
-  m[M_TPHASE + 3] += 1.0;
+  for (i = 0; i < 4; ++i) { m[M_TPHASE + i] = h->tphase[i]; h->tphase[i] = 0.0; }
+  m[M_TPHASE + 4] += 1.0;
   for (i = 0; i < 3; ++i) m[M_QPS + i] = h->qps[i];
   return ok;
 }
