@@ -120,7 +120,7 @@ def _scores(run: dict, nmpc, T: float) -> dict[str, Any]:
 
 _DESCRIPTIONS = {
     "plain_rti_osqp": "Gauss-Newton RTI on the same NLP, sparse (uncondensed) QP by OSQP "
-                      "(eps 1e-6, polished, default rho and scaling, warm started with the "
+                      "(OSQP's defaults: eps 1e-3, rho, scaling; polished; warm started with the "
                       "multipliers shifted), Jacobians generated as C; one QP per sample",
     "ipopt_gauss_newton": "IPOPT to convergence on the same NLP, Gauss-Newton Hessian "
                           "(hess_lag), expanded to SX, warm-started primal and dual",
