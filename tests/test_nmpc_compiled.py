@@ -186,6 +186,10 @@ def test_nmpc_update_runs_the_compiled_sample(rig25, nmpc):
     s2, _ = on.update(s1, 0.30, y)
     assert np.array_equal(np.asarray(s1.X), X1)           # the state passed in is kept
     assert s2.t == pytest.approx(0.01) and s2.r_prev == 0.30 and s2.info.success
+    # the QP's working set travels in the state: the next sample's QP starts from it
+    pb = on._problem
+    assert s2.working_set.shape == (pb.N + pb.ns + pb.n_rows,)
+    assert np.all(np.isin(s2.working_set, (-1.0, 0.0, 1.0)))
 
 
 def test_nmpc_says_why_it_runs_in_python(nmpc):

@@ -278,11 +278,16 @@ class CompiledNMPC:
 
     def memory(self, plan=None) -> CompiledMemory:
         """A fresh memory: before the first sample (``plan`` None), or holding ``plan``
-        = (X (4, N + 1), U (1, N), u_prev, r_prev, z (4,), d, t) of an
-        :class:`~.results.NMPCState` (scaled as there; r_prev m, d N, t s)."""
+        = (X (4, N + 1), U (1, N), u_prev, r_prev, z (4,), d, t[, working set]) of an
+        :class:`~.results.NMPCState` (scaled as there; r_prev m, d N, t s; the QP's
+        working set, :attr:`CompiledMemory.working_set`, or None: none active)."""
         mem = CompiledMemory(self.pb.N, self._msize)
         if plan is not None:
-            X, U, u_prev, r_prev, z, d, t = plan
+            X, U, u_prev, r_prev, z, d, t, *ws = plan
+            if ws and ws[0] is not None:                 # only a warm start: else none
+                ws = np.asarray(ws[0], dtype=float).ravel()
+                if ws.size == mem.working_set.size:
+                    mem.working_set[:] = ws
             n, b = 4 * (self.pb.N + 1), mem.buf
             b[:n] = np.asarray(X, dtype=float).ravel(order="F")
             b[n:n + self.pb.N] = np.asarray(U, dtype=float).ravel()

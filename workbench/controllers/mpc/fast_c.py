@@ -107,7 +107,7 @@ typedef struct {
   double Ar[NC * NZ], bl[NW], bu[NW], lam[NW], ws[NW], Av[NC];
   int sense[NW], sub[NC], in[NC];
   double tphase[4], qps[3];
-  DAQPWorkspace work; DAQPSettings settings;
+  DAQPWorkspace work;
 } wb_fast_t;
 
 static double now(void) {
@@ -157,7 +157,6 @@ wb_fast_t *wb_fast_new(const double *cfg) {
     wb_fast_free(h); return 0;
   }
   memcpy(h->cfg, cfg, sizeof(double) * (C_P + NP));
-  daqp_default_settings(&h->settings);
   return h;
 }
 
@@ -194,13 +193,12 @@ static int qp_daqp(wb_fast_t *h, int nsub, int warm) {
   p.n = NZ; p.m = NZ + nsub; p.ms = NZ; p.H = h->H; p.f = h->g; p.A = h->Ar;
   p.bupper = h->bu; p.blower = h->bl; p.sense = h->sense;
   r.x = h->dw; r.lam = h->lam;
-  /* as CasADi's DAQP plugin calls it: a zeroed workspace (daqp_quadprog leaves some of
-     its stack workspace's pointers unset), our settings, freed after the solve */
+  /* as CasADi's DAQP plugin calls it, on a zeroed workspace, but with DAQP's own
+     default settings (allocated by the set-up, freed with the workspace: a set-up that
+     fails frees the settings it holds) */
   memset(&h->work, 0, sizeof(h->work));
-  h->work.settings = &h->settings;
   if (setup_daqp(&p, &h->work, &t) < 0) r.exitflag = -1;
   else daqp_solve(&r, &h->work);
-  h->work.settings = 0;
   free_daqp_workspace(&h->work);
   free_daqp_ldp(&h->work);
   h->qps[0] += 1.0; h->qps[1] += nsub;
