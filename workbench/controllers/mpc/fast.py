@@ -5,21 +5,24 @@ measurement, extrapolate the reference to the nodes (with a ``preview``: the nod
 reference made in Python by :func:`.nodes.node_reference`, ~10 us) and project it onto
 the admissible stroke, shift the previous plan, update the
 force estimate, linearise and condense, solve the QP, update the plan, fall back to
-a cold start and then to the shifted previous plan on failure. The Gauss-Newton step
-(:func:`.qp.sqp_step`: prep, QP, post) has prep and post generated as C by CasADi;
-a hand-written C driver (:mod:`.fast_c`) does the rest of the sample and solves the
-QP with DAQP's own C library (the static ``libdaqpstat.a`` shipped with CasADi,
-linked in) on the rows that may be active: the previous sample's working set, and
-the rows its solution violates (the same optimum as on all rows; see :mod:`.fast_c`).
+a cold start and then to the shifted previous plan on failure. Of the Gauss-Newton
+step (:func:`.qp.sqp_step`: prep, QP, post) the linearisation (:func:`.qp.intervals`)
+and post (:func:`.qp.apply_step`) are generated as C by CasADi; a hand-written C
+driver (:mod:`.fast_c`) does the rest of the sample: the condensing (what
+:func:`.qp.condense` computes, by the block recursion; with limits between the nodes
+the generated :func:`.qp.condense` itself), and the QP, by DAQP's own C library (the
+static ``libdaqpstat.a`` shipped with CasADi, linked in) on the rows that may be
+active: the previous sample's working set, and the rows its solution violates (the
+same optimum as on all rows; see :mod:`.fast_c`).
 Python does per sample: four numbers into a preallocated buffer, one ctypes call,
 the command returned as a float; no array or memory object is made after the first
 sample.
 
-The step is built on the Problem's CasADi functions (:func:`.qp.prepare`,
-:func:`.qp.apply_step`), so a change of the problem (constraints, model) flows in;
-the driver replicates :mod:`.update`'s sample logic, and a test holds the two to
-the same plans on a closed loop (to 1e-8: the QP's optimum is the same, its rounding
-not).
+The step is built on the Problem's CasADi functions (:func:`.qp.intervals`,
+:func:`.qp.apply_step`), so a change of the model flows in; the driver replicates
+:mod:`.update`'s sample logic and :func:`.qp.condense`'s QP (its settings layout and
+soft limits read from the problem, checked at build), and tests hold the two to the
+same plans on closed loops (to 1e-8: the QP's optimum is the same, its rounding not).
 
 The memory (:class:`CompiledMemory`) is one float buffer, updated **in place** by
 each ``update`` (the returned state is the one passed in): a memory must not be
@@ -49,7 +52,8 @@ from .results import StepInfo
 
 __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
 
-#: compiled NMPCs of one horizon alive at once in a process (the prep's memory pool)
+#: compiled NMPCs of one horizon alive at once in a process (the generated functions'
+#: memory pool)
 _MAX_LIVE = 64
 #: C compiler flags of the step (no -ffast-math: the step tests for NaN; -fno-math-errno
 #: lets sqrt be one instruction: nothing reads errno; 10 % off the interval maps)

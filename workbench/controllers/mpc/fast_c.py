@@ -1,10 +1,20 @@
-"""The C driver of :mod:`.fast`: one NMPC sample around the generated prep and post,
-with the QP solved by DAQP on the rows that may be active.
+"""The C driver of :mod:`.fast`: one NMPC sample around the generated linearisation
+and post, with the condensing done here and the QP solved by DAQP on the rows that
+may be active.
 
 The driver follows :mod:`.update`'s sample logic (scale, node reference, shift,
-force estimate, Gauss-Newton steps, cold-start and previous-plan fallbacks). Its QP
-is the condensed QP of :func:`.qp.condense`, solved exactly, but not on all its rows
-at once:
+force estimate, Gauss-Newton steps, cold-start and previous-plan fallbacks).
+
+*Condensing by the block recursion.* The QP is :func:`.qp.condense`'s, built here
+from the interval Jacobians: the node corrections' sensitivities to the moves by
+G_{k+1} = [A_k G_k, B_k] (nx^2 k per node, ~N^2 nx^2 / 2 in all), the Hessian
+S0' Wx S0 + S1' Wv S1 + wdu D'D and the gradient over the lower-triangular S (node
+k + 1 depends on moves 0..k only: ~N^3 / 3), the rows from the same S. The generated
+MX loop computed the same in ~15 us at N = 20, this in ~3.5 us (the same numbers up
+to rounding; tests compare the closed loops). With limits between the nodes (rows
+:func:`.limits.interior_rows` adds) the generated :func:`.qp.condense` is called.
+
+The QP is then solved exactly, but not on all its rows at once:
 
 *Constraint generation from the previous working set.* Of the 2 x N x (soft limits)
 rows (160 at N = 20 with a speed limit) only a few are ever active; DAQP's cost is
@@ -97,7 +107,7 @@ typedef struct {
   double cfg[C_P + NP];
   double X[NXN], U[NN], Xn[NXN], Un[NN], u0, viol[NX], ok, stp, dd;
   double R[NN + 1], VR[NN + 1], zm[NX], zp[NX];
-  /* the QP between prep and post */
+  /* the condensed QP */
   double H[NZ * NZ], g[NZ], A[NC * NZ], lba[NC], uba[NC], lbx[NZ], ubx[NZ];
   double hh[NXN], G[NXN * NN], Xs[NXN], Us[NN], dw[NZ];
   /* the plan linearised (qp.intervals) */
