@@ -196,3 +196,25 @@ def test_nmpc_says_why_it_runs_in_python(nmpc):
     assert "jit" in nmpc.compiled_reason
     assert "compiled_sample" in nmpc.with_settings(jit=True, compiled_sample=False).compiled_reason
     assert "ipopt" in nmpc.with_settings(jit=True, mode="ipopt").compiled_reason
+
+
+def test_inlined_fmax_fmin_match_libm():
+    # the compiled sample replaces CasADi's calls of libm's fmax / fmin by the macros of
+    # fast._MINMAX (inlined: 7 us a sample at N = 20); on finite values, infinities and
+    # NaN (either side: the other operand) they must give libm's result exactly
+    import ctypes
+    from workbench.controllers.mpc.fast import _MINMAX, _inline_minmax
+    from workbench.integrate.jit import shared_library
+    src = ("#include <math.h>\n" + _MINMAX
+           + "int wb_check(const double *v, int n) { int i, j, bad = 0;\n"
+           "  for (i = 0; i < n; ++i) for (j = 0; j < n; ++j) {\n"
+           "    double a = WB_FMAX(v[i], v[j]), b = fmax(v[i], v[j]);\n"
+           "    double c = WB_FMIN(v[i], v[j]), d = fmin(v[i], v[j]);\n"
+           "    if (!((a == b) || (a != a && b != b)) || !((c == d) || (c != c && d != d))) ++bad;\n"
+           "  } return bad; }\n")
+    path, _ = shared_library("wb_test_minmax", src)
+    v = np.array([-np.inf, -2.5, -1e-300, 0.0, 3.0, 7.0, np.inf, np.nan])
+    assert ctypes.CDLL(str(path)).wb_check(v.ctypes.data_as(ctypes.c_void_p), len(v)) == 0
+    # and the replacement is made where CasADi's runtime calls them
+    out = _inline_minmax("x\n  return fmax(x, y);\n  return fmin(x, y);\n")
+    assert "WB_FMAX(x, y)" in out and "WB_FMIN(x, y)" in out and "return fmax" not in out
