@@ -132,6 +132,17 @@ def test_compiled_sample_without_a_speed_limit(rig25, nmpc):
     assert _compare(rig25, CompiledNMPC(free), free, 140) <= 1e-8
 
 
+def test_full_qp_fallback_gives_the_same_plans(rig25, nmpc, monkeypatch):
+    # no round of constraint generation allowed: every QP is the full one, solved cold
+    # (the driver's fallback when the reduced QPs do not settle or DAQP fails on them)
+    from workbench.controllers.mpc import fast as fast_mod
+    monkeypatch.setattr(fast_mod, "QP_ROUNDS", 0)
+    counts = []
+    assert _compare(rig25, CompiledNMPC(nmpc), nmpc, 60, counts) <= 1e-8
+    calls, rows, full = np.array(counts).T
+    assert np.all(full == calls) and np.all(rows == 40 * calls)
+
+
 def test_plans_stay_inside_the_command_range(rig25, nmpc, fast):
     # the model clips the spool at the command limits (sensitivity 1 inside, 0.5 at
     # the limit): a plan at the limit is kept INSIDE it, so that its linearisation does
