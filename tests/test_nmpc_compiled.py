@@ -174,6 +174,10 @@ def test_compiled_memory_reports_the_last_sample(rig25, fast):
     assert mem2 is mem and mem.t == pytest.approx(0.01)
     with pytest.raises(InputError, match="p_b"):
         fast.update(mem, 0.25, {"x": 0.2, "v": 0.0, "p_a": 4e5})
+    with pytest.raises(InputError, match="p_a"):
+        fast.update(mem, 0.25, {"x": 0.2, "v": 0.0, "p_a": float("nan"), "p_b": 4e5})
+    with pytest.raises(InputError, match="reference"):
+        fast.update(mem, float("inf"), y)
 
 
 def test_compiled_step_refuses_what_it_does_not_run(nmpc):

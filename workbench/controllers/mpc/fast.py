@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+from math import isfinite
 import sys
 import tempfile
 import weakref
@@ -342,6 +343,11 @@ class CompiledNMPC:
             yy[0], yy[1], yy[2], yy[3] = y["x"], y["v"], y["p_a"], y["p_b"]
         except KeyError as exc:
             raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
+        if not (isfinite(yy[0]) and isfinite(yy[1]) and isfinite(yy[2]) and isfinite(yy[3])
+                and isfinite(r)):
+            bad = [k for k, v in (*zip(NMPC_STATES, yy), ("reference", r)) if not isfinite(v)]
+            raise InputError(f"the NMPC got a measurement or reference that is not a finite "
+                             f"number: {', '.join(bad)}")
         if self.nmpc.preview is None:
             self._call(self._h, state.ptr, self._yp, r, self._up)
         else:
