@@ -57,9 +57,10 @@ def _reference(k: int) -> float:
     return 0.47 + 0.3 * 0.01 * (k - 120)
 
 
-def _compare(rig25, ours, ref, samples: int) -> float:
+def _compare(rig25, ours, ref, samples: int, counts: list | None = None) -> float:
     """Largest difference of plan, command, force estimate and iterations over a closed
-    loop driven by the reference NMPC, both fed the same measurements."""
+    loop driven by the reference NMPC, both fed the same measurements (``counts``: the
+    compiled sample's QP counts per sample appended)."""
     sim = Simulator(rig25)
     idx = [rig25.state_index(k) for k in NAMES]
     x = rig25.initial_state(0.10)
@@ -74,6 +75,8 @@ def _compare(rig25, ours, ref, samples: int) -> float:
                     float(np.max(np.abs(np.asarray(sa.U).ravel() - np.asarray(sf.U).ravel()))),
                     abs(ua - uf), abs(sa.d - sf.d) / 100.0, abs(sa.u_prev - sf.u_prev))
         info = ours.info(sf) if isinstance(ours, CompiledNMPC) else sf.info
+        if counts is not None:
+            counts.append(sf.qp_counts())
         assert info.iterations == sa.info.iterations and info.success == sa.info.success
         assert info.restarted == sa.info.restarted
         x = sim.step(x, float(np.clip(ua, 0.0, 10.0)), 0.01)[-1]
@@ -101,7 +104,56 @@ def test_compiled_sample_follows_a_preview(rig25, nmpc):
         k = np.floor(np.asarray(t, dtype=float) / 0.01 + 1e-9).astype(int)
         return np.array([_reference(int(i)) for i in np.ravel(k)]).reshape(np.shape(t))
     pv = nmpc.with_settings(preview=preview)
-    assert _compare(rig25, CompiledNMPC(pv), pv, 140) <= 1e-8
+    counts = []
+    assert _compare(rig25, CompiledNMPC(pv), pv, 140, counts) <= 1e-8
+    # the same plans although DAQP saw only the rows of the last working set and those
+    # its solution violated (fast_c): on this loop limits were active (rows given),
+    # rows were added (a second DAQP call in an RTI sample), and the QP was never
+    # solved on all its 40 rows (the rows given: a sum over a sample's DAQP calls)
+    calls, rows, full = np.array(counts).T
+    assert rows.sum() > 0 and calls[5:].max() >= 2 and full.sum() == 0
+    assert np.all(rows < 40 * calls)
+
+
+def test_compiled_sample_with_limits_between_the_nodes(rig25, nmpc):
+    # limits also at the RK4 substep between two nodes: the driver condenses with the
+    # generated qp.condense (its interior rows), not its own loop; two substeps
+    il = nmpc.with_settings(interior_limits=True, substeps=2)
+    counts = []
+    assert _compare(rig25, CompiledNMPC(il), il, 140, counts) <= 1e-8
+    assert np.array(counts)[:, 1].sum() > 0                 # limits were active
+
+
+def test_full_qp_fallback_without_a_speed_limit(rig25, nmpc, monkeypatch):
+    # three soft limits (stroke, p_a, p_b) instead of four: the driver's condensing
+    # reads the soft limits and the settings' layout from the problem. And no round of
+    # constraint generation allowed: every QP is the full one, solved cold (the
+    # driver's fallback when the reduced QPs do not settle or DAQP fails on them).
+    # One build for both (each build costs seconds).
+    from workbench.controllers.mpc import fast as fast_mod
+    monkeypatch.setattr(fast_mod, "QP_ROUNDS", 0)
+    free = nmpc.with_settings(max_speed=None)
+    assert free._problem.ns == 2 and len(free._problem.soft) == 3
+    counts = []
+    assert _compare(rig25, CompiledNMPC(free), free, 140, counts) <= 1e-8
+    calls, rows, full = np.array(counts).T
+    assert np.all(full == calls) and np.all(rows == 30 * calls)
+
+
+def test_plans_stay_inside_the_command_range(rig25, nmpc, fast):
+    # the model clips the spool at the command limits (sensitivity 1 inside, 0.5 at
+    # the limit): a plan at the limit is kept INSIDE it, so that its linearisation does
+    # not depend on the rounding of the QP's step. The 100 mm step saturates the valve.
+    from workbench.controllers.mpc.qp import INSIDE
+    pb, sim = fast.pb, Simulator(rig25)
+    x, mem, lo = rig25.initial_state(0.10), None, []
+    for k in range(30):
+        y = {n: float(x[rig25.state_index(n)]) for n in NAMES}
+        mem, u = fast.update(mem, 0.10 if k < 5 else 0.30, y)
+        lo.append(mem.U.min())
+        x = sim.step(x, float(np.clip(u, 0.0, 10.0)), 0.01)[-1]
+    assert min(lo) == pytest.approx(pb.w_lo + INSIDE, abs=1e-15)   # saturated ...
+    assert min(lo) > pb.w_lo                                         # ... inside
 
 
 def test_compiled_memory_reports_the_last_sample(rig25, fast):
@@ -113,12 +165,16 @@ def test_compiled_memory_reports_the_last_sample(rig25, fast):
     assert u == pytest.approx(fast.pb.u_c + fast.pb.u_s * mem.U[0], rel=1e-14)
     assert mem.r_prev == 0.25 and mem.t == 0.0
     # the phases are timed inside the sample: each > 0, together within the sample
-    prep, qp, post, whole = mem.phase_times()
-    assert min(prep, qp, post) > 0.0 and prep + qp + post <= whole
+    lin, cond, qp, post, whole = mem.phase_times()
+    assert min(lin, cond, qp, post) > 0.0 and lin + cond + qp + post <= whole
     mem2, _ = fast.update(mem, 0.25, y)
     assert mem2 is mem and mem.t == pytest.approx(0.01)
     with pytest.raises(InputError, match="p_b"):
         fast.update(mem, 0.25, {"x": 0.2, "v": 0.0, "p_a": 4e5})
+    with pytest.raises(InputError, match="p_a"):
+        fast.update(mem, 0.25, {"x": 0.2, "v": 0.0, "p_a": float("nan"), "p_b": 4e5})
+    with pytest.raises(InputError, match="reference"):
+        fast.update(mem, float("inf"), y)
 
 
 def test_compiled_step_refuses_what_it_does_not_run(nmpc):
@@ -142,9 +198,35 @@ def test_nmpc_update_runs_the_compiled_sample(rig25, nmpc):
     s2, _ = on.update(s1, 0.30, y)
     assert np.array_equal(np.asarray(s1.X), X1)           # the state passed in is kept
     assert s2.t == pytest.approx(0.01) and s2.r_prev == 0.30 and s2.info.success
+    # the QP's working set travels in the state: the next sample's QP starts from it
+    pb = on._problem
+    assert s2.working_set.shape == (pb.N + pb.ns + pb.n_rows,)
+    assert np.all(np.isin(s2.working_set, (-1.0, 0.0, 1.0)))
 
 
 def test_nmpc_says_why_it_runs_in_python(nmpc):
     assert "jit" in nmpc.compiled_reason
     assert "compiled_sample" in nmpc.with_settings(jit=True, compiled_sample=False).compiled_reason
     assert "ipopt" in nmpc.with_settings(jit=True, mode="ipopt").compiled_reason
+
+
+def test_inlined_fmax_fmin_match_libm():
+    # the compiled sample replaces CasADi's calls of libm's fmax / fmin by the macros of
+    # fast._MINMAX (inlined: 7 us a sample at N = 20); on finite values, infinities and
+    # NaN (either side: the other operand) they must give libm's result exactly
+    import ctypes
+    from workbench.controllers.mpc.fast import _MINMAX, _inline_minmax
+    from workbench.integrate.jit import shared_library
+    src = ("#include <math.h>\n" + _MINMAX
+           + "int wb_check(const double *v, int n) { int i, j, bad = 0;\n"
+           "  for (i = 0; i < n; ++i) for (j = 0; j < n; ++j) {\n"
+           "    double a = WB_FMAX(v[i], v[j]), b = fmax(v[i], v[j]);\n"
+           "    double c = WB_FMIN(v[i], v[j]), d = fmin(v[i], v[j]);\n"
+           "    if (!((a == b) || (a != a && b != b)) || !((c == d) || (c != c && d != d))) ++bad;\n"
+           "  } return bad; }\n")
+    path, _ = shared_library("wb_test_minmax", src)
+    v = np.array([-np.inf, -2.5, -1e-300, 0.0, 3.0, 7.0, np.inf, np.nan])
+    assert ctypes.CDLL(str(path)).wb_check(v.ctypes.data_as(ctypes.c_void_p), len(v)) == 0
+    # and the replacement is made where CasADi's runtime calls them
+    out = _inline_minmax("x\n  return fmax(x, y);\n  return fmin(x, y);\n")
+    assert "WB_FMAX(x, y)" in out and "WB_FMIN(x, y)" in out and "return fmax" not in out

@@ -27,7 +27,11 @@ import numpy as np
 from .limits import interior_rows
 
 
-__all__ = ["sqp_step", "condense", "prepare", "apply_step", "qp_solver"]
+__all__ = ["sqp_step", "intervals", "condense", "prepare", "apply_step", "qp_solver", "INSIDE"]
+
+#: scaled command: the plan is kept this far inside the command range (1e-8 V on a 10 V
+#: span; see :func:`apply_step`)
+INSIDE = 1e-9
 
 
 def sqp_step(pb, jit: bool | None = None) -> "ca.Function | _LazyStep":
@@ -89,8 +93,51 @@ def _step(pb, prep: ca.Function, post: ca.Function) -> ca.Function:
                        ["X", "U", "u0", "viol", "ok", "step", "d"])
 
 
+def intervals(pb) -> ca.Function:
+    """(previous plan, shift?, measured state, settings) -> the plan linearised.
+
+    Returns ``wb_nmpc_lin(Xp, Up, shift, x0, up, zprev, dprev, est, P) -> (X, U, d, A,
+    B, c, dz0[, Zi, Ai, Bi])``: the plan (shifted if ``shift``), the force estimate,
+    the interval Jacobians A (nx, nx N) and B (nx, N), the shooting defects c (nx, N),
+    the measured minus the planned initial state dz0, and with limits between the
+    nodes the interior points and their Jacobians (``pb.Fi`` mapped): the inputs of
+    :func:`condense` besides the reference, ``up`` and P.
+    """
+    N, nx = pb.N, pb.nx
+    Xp = ca.MX.sym("Xp", nx, N + 1)
+    Up = ca.MX.sym("Up", 1, N)
+    shift = ca.MX.sym("shift")
+    x0 = ca.MX.sym("x0", nx)
+    up = ca.MX.sym("up")
+    zprev = ca.MX.sym("zprev", nx)                     # measured state one sample ago
+    dprev = ca.MX.sym("dprev")                         # disturbance estimate then, N
+    est = ca.MX.sym("est")                             # 1: update the estimate
+    P = ca.MX.sym("P", pb.P.size)
+    ins = [Xp, Up, shift, x0, up, zprev, dprev, est, P]
+    return ca.Function("wb_nmpc_lin", ins, _intervals(pb, *ins),
+                       ["Xp", "Up", "shift", "x0", "up", "zprev", "dprev", "est", "P"],
+                       ["X", "U", "d", "A", "B", "c", "dz0"]
+                       + ([] if pb.Fi is None else ["Zi", "Ai", "Bi"]))
+
+
+def _intervals(pb, Xp, Up, shift, x0, up, zprev, dprev, est, P) -> list:
+    """The expressions of :func:`intervals`."""
+    N = pb.N
+    # the estimate's one-interval prediction only where it is used (est, gain != 0:
+    # the first step of a sample with the observer on); else d_{k-1}, bounded as
+    # estimate() bounds it (the same value: estimate() adds 0 to it then)
+    d = ca.if_else(est * P[-1] != 0, pb.estimate(zprev, up, dprev, x0, est, P[-1]),
+                   ca.fmin(ca.fmax(dprev, -pb.d_max), pb.d_max), True)
+    X = ca.if_else(shift, ca.horzcat(Xp[:, 1:], Xp[:, N]), Xp)
+    U = ca.if_else(shift, ca.horzcat(Up[:, 1:], Up[:, N - 1]), Up)
+    Xn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
+    inner = [] if pb.Fi is None else list(pb.Fi.map(N)(X[:, :N], U, ca.repmat(d, 1, N)))
+    return [X, U, d, A, B, Xn - X[:, 1:], x0 - X[:, 0], *inner]
+
+
 def prepare(pb) -> ca.Function:
-    """(previous plan, shift?, measured state, reference, settings) -> QP data."""
+    """(previous plan, shift?, measured state, reference, settings) -> QP data:
+    :func:`intervals` then :func:`condense`."""
     N, nx = pb.N, pb.nx
     Xp = ca.MX.sym("Xp", nx, N + 1)
     Up = ca.MX.sym("Up", 1, N)
@@ -99,16 +146,12 @@ def prepare(pb) -> ca.Function:
     R = ca.MX.sym("R", 1, N + 1)                       # reference at the nodes, scaled
     VR = ca.MX.sym("VR", 1, N + 1)                     # its velocity, scaled
     up = ca.MX.sym("up")
-    zprev = ca.MX.sym("zprev", nx)                     # measured state one sample ago
-    dprev = ca.MX.sym("dprev")                         # disturbance estimate then, N
-    est = ca.MX.sym("est")                             # 1: update the estimate
+    zprev = ca.MX.sym("zprev", nx)
+    dprev = ca.MX.sym("dprev")
+    est = ca.MX.sym("est")
     P = ca.MX.sym("P", pb.P.size)
-    d = pb.estimate(zprev, up, dprev, x0, est, P[-1])
-    X = ca.if_else(shift, ca.horzcat(Xp[:, 1:], Xp[:, N]), Xp)
-    U = ca.if_else(shift, ca.horzcat(Up[:, 1:], Up[:, N - 1]), Up)
-    Xn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
-    inner = [] if pb.Fi is None else pb.Fi.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
-    out = condense(pb)(A, B, Xn - X[:, 1:], x0 - X[:, 0], X, U, R, VR, up, P, *inner)
+    X, U, d, A, B, c, dz0, *inner = _intervals(pb, Xp, Up, shift, x0, up, zprev, dprev, est, P)
+    out = condense(pb)(A, B, c, dz0, X, U, R, VR, up, P, *inner)
     return ca.Function("wb_nmpc_prep", [Xp, Up, shift, x0, R, VR, up, zprev, dprev, est, P],
                        [*out, X, U, d])
 
@@ -212,7 +255,12 @@ def apply_step(pb) -> ca.Function:
                       ca.logic_and(ca.mmax(ca.fabs(ca.vec(Xn))) < 1e2,
                                    ca.logic_and(ca.mmin(Un) >= pb.w_lo - 1e-6,
                                                 ca.mmax(Un) <= pb.w_hi + 1e-6)))
-    Un = ca.fmin(ca.fmax(Un, pb.w_lo), pb.w_hi)        # the QP's tolerance, not a clip
+    # the QP's tolerance, not a clip; and INSIDE the range: the model clips the spool
+    # at the command limits, so its sensitivity to the command is 1 inside, 0 outside
+    # and 0.5 exactly at the limit (the fmin/fmax tie): a plan left at the limit was
+    # linearised with 1 or 0.5 by the rounding of the QP's step (an exact QP solved
+    # another way flipped it: H 4x off at the next sample)
+    Un = ca.fmin(ca.fmax(Un, pb.w_lo + INSIDE), pb.w_hi - INSIDE)
     return ca.Function("wb_nmpc_post", [X, U, h, G, dw, P],
                        [Xn, Un, Un[0], viol, ok, ca.mmax(ca.fabs(du))])
 

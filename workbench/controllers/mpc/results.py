@@ -51,6 +51,9 @@ class NMPCState:
     lam : (lam_x, lam_g) of the last IPOPT solve (mode "ipopt"), else None.
     info : StepInfo of the last update.
     t : s, time of the last sample since the first update (for the preview).
+    working_set : after a compiled sample (:mod:`.fast`), the working set of its last
+        QP (the bounds, then the rows: +1 upper, -1 lower, 0 inactive), where its next
+        QP starts; else None.
     """
 
     X: Any
@@ -62,6 +65,7 @@ class NMPCState:
     lam: Any = None
     info: StepInfo | None = None
     t: float = 0.0
+    working_set: Any = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -132,12 +132,13 @@ def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
     numpy arrays: a casadi.DM each would cost 30 us a sample)."""
     mem = fast.memory(None if state is None else
                       (state.X, state.U, state.u_prev, state.r_prev, state.z, state.d,
-                       state.t))
+                       state.t, state.working_set))
     mem, _ = fast.update(mem, r, y)
     info = mem.step_info(pb)
     info = StepInfo(**{**vars(info), "solve_time": time.perf_counter() - t0})
     return NMPCState(X=mem.X.copy(), U=mem.U[None, :].copy(), u_prev=mem.u_prev, r_prev=r,
-                     z=mem.z.copy(), d=mem.d, lam=None, info=info, t=mem.t)
+                     z=mem.z.copy(), d=mem.d, lam=None, info=info, t=mem.t,
+                     working_set=mem.working_set.copy())
 
 
 def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: float,
