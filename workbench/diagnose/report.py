@@ -60,8 +60,8 @@ def _summary_section(d) -> rp.Section:
           ("sample time", float(prep.dt) * 1e3, "ms"), ("replay", d.mode),
           ("signals compared", ", ".join(prep.signals)),
           ("position noise", prep.noise["x"] * 1e6, "um")]
-    if prep.has_pressures:
-        kv.append(("pressure noise", prep.noise["p_a"], "Pa"))
+    for side in prep.pressures:
+        kv.append((f"pressure noise {side}", prep.noise[side], "Pa"))
     kv.append(("diagnosis wall time", d.timings.get("total", float("nan")), "s"))
     blocks = [rp.KeyValues(kv)]
     fit_rows = [[s, d.fit_before[s]] + [f.fit_after.get(s) for f in d.findings]
