@@ -7,7 +7,9 @@ Method
    recording has ``r`` and the controller reproduces the recorded command, else open
    loop on ``u`` re-anchored on the measured state every 0.5 s. The fit per signal is
    ``fit_before``. Rig recordings: one chamber pressure is fitted and anchored, the
-   other estimated by the force balance (:func:`.data.other_side`); a recorded ``p_s``
+   other estimated by the force balance (:func:`.data.other_side`; the predictions
+   then start where the piston accelerates least, where that estimate is good, and the
+   witness and the polish use the recorded side); a recorded ``p_s``
    that sags is the supply sample by sample (the replay then runs on the engine);
    several recordings are joined (:func:`.data.prepare_many`), replayed one by one,
    with their fits reported per recording.
@@ -16,9 +18,9 @@ Method
    per-sample error that does not drift; its intervals above the noise and its share
    in each operating regime (at rest, moving, reversals, near the valve centre, high
    flow, fast pressure transients, accelerating) say where the mismatch lives. The
-   flow witnesses (mass flow each chamber received by the chamber equation, minus the
-   valve law at the recorded command and pressures) and the force witness are shown
-   in the report.
+   flow witnesses (mass flow each recorded chamber received by the chamber equation,
+   minus the valve law at the recorded command, pressures and supply) and the force
+   witness are shown in the report.
 3. **Explain** (:mod:`.candidates`, :mod:`.refit`, :mod:`.explain`, :mod:`.sets`):
    every effect of formats.md section 2 and every nominal value that may be wrong is
    added to the plant and refitted on the short-horizon predictions (signature scan
@@ -34,7 +36,10 @@ Method
 4. **Model and refit**: each finding's values are polished by the grey-box estimator
    (:mod:`.polish`) on the windows where it removes most of the mismatch; the
    augmented plant is replayed like the nominal one (``fit_after``) and written as
-   ``plant.augmented.toml``.
+   ``plant.augmented.toml``. What it still leaves is compared with the noise floor
+   per signal and regime (:func:`.health.verdict`); where the recorded loop hunts
+   against stiction (:func:`.health.hunting`), whose phase no free-running replay
+   reproduces, the share of the mismatch there and the fit outside are said.
 
 Examples
 --------
