@@ -185,7 +185,7 @@ def fit_candidate(prep: Prepared, params: PlantParams, cand: Candidate, shpe: Pr
     z0, grid = _start_point(obj, start)
     z, J, message = _least_squares(obj, z0, max_nfev)
     vals = cand.values(z)
-    Y = model.run(shpe, vals)
+    Y = obj.outputs(z)                  # the solution's replay, kept by the objective
     std, ci, corr = _uncertainty(cand.free, vals, J, shpe.residuals(Y), shpe.n_eff)
     seg_cost = seg.cost(model.run(seg, vals)) if seg is not None else None
     return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values=vals, std=std, ci95=ci,
@@ -226,11 +226,13 @@ class _Objective:
         self.exact = EXACT_JACOBIAN if exact is None else bool(exact)
         self.nfev = 0
         self._cache: dict[bytes, np.ndarray] = {}
+        self._outputs: dict[bytes, np.ndarray] = {}
 
     def cost(self, values: Mapping[str, float]) -> float:
-        """Short-horizon prediction cost at ``values`` (candidate keys; not cached)."""
-        self.nfev += 1
-        return self.shpe.cost(self.model.run(self.shpe, values))
+        """Short-horizon prediction cost at ``values`` (candidate keys), replayed at their
+        optimiser coordinates and kept: the least squares starting from the best grid
+        point does not replay it again."""
+        return self.shpe.cost(self.outputs(self.cand.z0(values)))
 
     def __call__(self, z: np.ndarray) -> np.ndarray:
         z = np.asarray(z, dtype=float)
@@ -238,8 +240,16 @@ class _Objective:
         if key not in self._cache:
             self.nfev += 1
             vals = self.cand.values(np.clip(z, self.lo, self.hi))
-            self._cache[key] = self.shpe.residuals(self.model.run(self.shpe, vals))
+            Y = self.model.run(self.shpe, vals)
+            self._cache[key], self._outputs[key] = self.shpe.residuals(Y), Y
         return self._cache[key]
+
+    def outputs(self, z: np.ndarray) -> np.ndarray:
+        """The engine's outputs at ``z`` (replayed once: kept from :meth:`__call__`)."""
+        z = np.asarray(z, dtype=float)
+        if z.tobytes() not in self._outputs:
+            self(z)
+        return self._outputs[z.tobytes()]
 
     def jacobian(self, z: np.ndarray) -> np.ndarray:
         """Jacobian of the residuals at ``z``: the secant, or (``exact``) the exact one
@@ -257,7 +267,7 @@ class _Objective:
         self.nfev += 1
         key = z.tobytes()
         if key not in self._cache:
-            self._cache[key] = self.shpe.residuals(Y)
+            self._cache[key], self._outputs[key] = self.shpe.residuals(Y), Y
         return self.shpe.residual_jacobian(Y, dY)
 
 
