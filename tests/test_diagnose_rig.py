@@ -199,3 +199,29 @@ def test_one_side_names_the_leak_without_a_spurious_spool_lag(plant_file):
     assert d.fit_after["p_a"] > 95.0
     # the witnesses are formed for the recorded chamber (and the force)
     assert set(d.witness) == {"force", "q_a"}
+
+
+def test_flow_witnesses_use_the_recorded_supply(plant_file):
+    """The sagging supply of the test above, logged: the flow witnesses (chamber
+    equation minus the valve law along the measurement) are formed with the recorded
+    p_s sample by sample, so the nominal plant -- which lacks only the droop -- leaves
+    a smaller pressure-rate equation error than with the constant supply of the plant
+    file: p_a + p_b channel costs (noise units) measured 8.7 against 13.0 (p_b 4.6
+    against 8.2), bound a ratio of 0.8 -- before, the witnesses ignored p_s and the two
+    were the same. The foreign rig's own valve and chamber laws leave the rest."""
+    from workbench.diagnose.replays import observer_rates
+    from workbench.diagnose.witness import Witness
+    plant = Plant.from_toml(plant_file).with_friction("stick")
+    rec = _foreign(plant_file, 5, 6.0, supply=True,
+                   overrides={"supply.reservoir_volume": 3e-4,
+                              "supply.regulator_conductance": 4e-9})
+    p2, _ = recorded_supply(plant, rec)
+    prep = prepare(p2, rec)
+    wit = Witness.build(prep)
+    costs = {}
+    for label, supply in (("recorded", prep.supply), ("constant", None)):
+        prep.supply = supply
+        res = wit.residuals(observer_rates(prep, p2.params, True))
+        cc = wit.channel_costs(res)
+        costs[label] = cc["p_a"] + cc["p_b"]
+    assert costs["recorded"] < 0.8 * costs["constant"], costs
