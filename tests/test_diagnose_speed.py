@@ -38,11 +38,12 @@ def test_cpu_seconds_include_finished_child_processes():
 # recording of the synthetic rig without dry friction (no stick-slip, no deadband
 # edge), evaluated by CasADi's virtual machine (jit=False: no C compiler run in the
 # suite). Compared on the first 0.8 s of short-horizon predictions (four windows):
-# later in this recording one sample of the replay jumps back by 0.04 mm and returns
-# (sample 442 of the predictions, 0.91 s), a discontinuity of the discrete replay at
-# which a central difference of 1e-7 reads slopes of 0.9 m per unit -- not a
-# derivative to compare with (not explained yet; the secant Jacobian the refits use
-# by default steps over it).
+# later in this recording (0.91 s) one 2 ms ROS2 step moves x by -36 um where eight
+# sub-steps give +15 um (the piston starting to move under a 1.4e7 Pa/s pressure
+# rise: a local error of the coarse step that the engine's guard does not catch), and
+# the next step returns; there central differences read slopes of 0.9 m per unit at a
+# step of 1e-7 (a jump of 0.2 um in the replay, cause not found) -- not a derivative
+# to compare with.
 
 import numpy as np
 import pytest
