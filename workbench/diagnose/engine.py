@@ -26,6 +26,10 @@ per-sample function (reset + controller + step) is accumulated over a chunk of
 samples (``mapaccum``) and compiled to C once per plant structure and controller
 (:func:`workbench.integrate.jit.compiled`, cached by source hash); Python loops over the
 chunks. One replay of 24 s at 1 kHz of the 4-state plant takes about 0.1 s.
+
+:meth:`Engine.run_sensitivity` also carries the exact forward sensitivities of the
+replay with respect to chosen directions in parameter space (CasADi's forward mode
+through the steps, the re-anchoring and the controller), compiled on first use.
 """
 
 from __future__ import annotations
@@ -362,7 +366,7 @@ class Engine:
         shape (3, k, samples): d(x, p_a, p_b)/dz_j at each sample.
         """
         D = np.asarray(directions, dtype=float)
-        npar, k = D.shape
+        k = D.shape[1]
         if k not in self._sens:
             self._sens[k] = self._accumulated(k)
         z = np.concatenate([np.asarray(z0, dtype=float), np.zeros(len(z0) * k)])
