@@ -13,7 +13,12 @@ The method is split into parts (one concept per module):
 * :mod:`.explain` -- all candidates in parallel, ranked by evidence; the findings chosen;
 * :mod:`.evidence` -- a finding's evidence sentence and confidence;
 * :mod:`.polish` -- a finding's values refined by the grey-box estimator;
-* :mod:`.health` -- failed replays (never a silent all-clear) and the noise floor;
+* :mod:`.health` -- failed replays (never a silent all-clear), the noise floor, and
+  stick-slip hunting stretches (what a free-running replay cannot reproduce);
+* :mod:`.replays` -- the recording replayed on a plant (fit before and after);
+* :mod:`.nominal` -- the nominal plant against the recording (objective, regimes);
+* :mod:`.result` -- :class:`Finding`, :class:`Diagnosis` (JSON, summary, result set);
+* :mod:`.blas` -- one BLAS thread while a diagnosis runs (its workers are processes);
 * :mod:`.core` -- :func:`diagnose`: replay, locate, explain, augment, refit;
 * :mod:`.report`, :mod:`.figures` -- the HTML/PDF report (``workbench diagnose`` is
   :mod:`workbench.cli.diagnose`, ``workbench bench diagnose`` :mod:`workbench.bench.diagnose`);

@@ -317,8 +317,8 @@ def _pressure_notes(sides: tuple[str, ...]) -> list[str]:
                    f"re-anchored on the measured {sides[0]} and on {other} estimated from "
                    "the piston's force balance (nominal mass, viscous friction and load; "
                    "dry friction, unknown, biases it by F/A); the fit compares x and "
-                   f"{sides[0]}; the flow witnesses (which need both pressures) are not "
-                   "available")
+                   f"{sides[0]}; the flow witness is formed for chamber {sides[0][-1]} "
+                   "only, and the grey-box polish compares x and " f"{sides[0]}")
     return out
 
 

@@ -34,7 +34,7 @@ from ..signals import fit
 from .data import Prepared
 
 __all__ = ["DiagnosisError", "ReplayCheck", "check_replay", "floor_fit", "unexplained", "verdict",
-           "STROKE_MARGIN", "UNEXPLAINED_RATIO"]
+           "hunting", "STROKE_MARGIN", "UNEXPLAINED_RATIO", "HUNT_STICK"]
 
 #: Share of the stroke beyond an end stop that no working replay reaches (the stops'
 #: contact at 300 Hz lets a 1 m/s piston in by well under 1 mm).
@@ -43,6 +43,12 @@ STROKE_MARGIN = 0.05
 #: the error a perfect model would leave (the noise): a model error of the size of the
 #: noise doubles the error energy only at a ratio of sqrt(2); 3 is well clear of it.
 UNEXPLAINED_RATIO = 3.0
+
+
+#: s: shortest stick phase before a slip of a hunt (a few velocity-smoothing windows,
+#: so that the zero crossing of an underdamped settling, which passes through rest in a
+#: few samples, is not a stick phase).
+HUNT_STICK = 0.1
 
 
 class DiagnosisError(WorkbenchError):
@@ -132,11 +138,17 @@ def floor_fit(y: np.ndarray, sigma: float) -> float:
 
 def unexplained(measured: Mapping[str, np.ndarray], sim: Mapping[str, np.ndarray],
                 noise: Mapping[str, float], masks: Mapping[str, np.ndarray],
-                signals: Sequence[str], label: str = "the augmented model"
+                signals: Sequence[str], label: str = "the augmented model",
+                hunt: np.ndarray | None = None, hunt_text: str = ""
                 ) -> tuple[dict[str, dict[str, float]], list[str]]:
     """Per signal: fit reached, noise-floor fit, error / noise ratio overall and per
     operating regime; and the plain statements for the signals still unexplained
     (error above :data:`UNEXPLAINED_RATIO` times the noise).
+
+    ``hunt`` (mask of the stick-slip hunting stretches, :func:`hunting`; ``hunt_text``
+    their times): each row also gets the ratio there (``"stick-slip hunting"``), the
+    share of the error energy there (``hunting_share``) and the fit outside them
+    (``fit_outside_hunting``), and the statement says both.
 
     Returns
     -------
@@ -164,13 +176,39 @@ def unexplained(measured: Mapping[str, np.ndarray], sim: Mapping[str, np.ndarray
             row[name] = r
             if r > worst_r:
                 worst, worst_r = name, r
+        hunted = _hunting_row(y, e, ok, sig, hunt, row)
         table[s] = row
         if row["ratio"] > UNEXPLAINED_RATIO:
-            where = (f": the remaining mismatch is largest {_at(worst)} ({worst_r:.1f} x the "
-                     f"noise)") if worst else ""
+            if hunted and row["hunting_share"] > 0.5:
+                where = (f": {100 * row['hunting_share']:.0f} % of the remaining mismatch is in "
+                         f"stick-slip hunting ({hunt_text}; {row['stick-slip hunting']:.1f} x the "
+                         "noise there): the loop hunts against stiction around a held "
+                         "reference, and a free-running replay cannot reproduce the phase of "
+                         "that limit cycle")
+            else:
+                where = (f": the remaining mismatch is largest {_at(worst)} ({worst_r:.1f} x "
+                         f"the noise)") if worst else ""
+            if hunted:
+                where += (f"; outside the hunting stretches {label} fits "
+                          f"{row['fit_outside_hunting']:.1f} %")
             said.append(f"{s}: {label} fits {row['fit']:.1f} %, the noise floor allows "
                         f"{row['floor']:.1f} % (error {row['ratio']:.1f} x the noise){where}")
     return table, said
+
+
+def _hunting_row(y: np.ndarray, e: np.ndarray, ok: np.ndarray, sig: float,
+                 hunt: np.ndarray | None, row: dict[str, float]) -> bool:
+    """Add the hunting stretches' entries to ``row`` (see :func:`unexplained`); False
+    when there are none worth a number (fewer than 10 samples in or outside)."""
+    if hunt is None:
+        return False
+    inside, outside = hunt & ok, ~hunt & ok
+    if inside.sum() < 10 or outside.sum() < 10:
+        return False
+    row["stick-slip hunting"] = float(np.sqrt(np.mean(e[inside] ** 2)) / sig)
+    row["hunting_share"] = float(np.sum(e[inside] ** 2) / max(np.sum(e[ok] ** 2), 1e-300))
+    row["fit_outside_hunting"] = fit(y[outside], y[outside] - e[outside])
+    return True
 
 
 def _at(regime: str) -> str:
@@ -180,6 +218,62 @@ def _at(regime: str) -> str:
     if regime in ("moving", "accelerating"):
         return f"while {regime}"
     return f"at {regime}s" if regime == "velocity reversal" else f"in {regime}s"
+
+
+def _slips(x: np.ndarray, moving: np.ndarray, least: float) -> list[tuple[int, int]]:
+    """(start, end) of each slip: a run of moving samples that moves the piston by
+    more than ``least``."""
+    d = np.diff(np.concatenate(([0], moving.astype(int), [0])))
+    return [(int(a), int(b)) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1))
+            if abs(float(x[b - 1] - x[a])) > least]
+
+
+def hunting(prep: Prepared, v_rest: float) -> list[tuple[int, int]]:
+    """Stick-slip hunting stretches of a closed-loop recording (sample ranges).
+
+    Where the reference is held, a loop that hunts against stiction stops off the
+    reference, builds up force while the piston sticks, breaks away and stops again
+    (beyond or short of the reference). A hold hunts when, after its first slip (the
+    approach), the piston slips again from a stick phase (still, within the slip
+    threshold, for at least :data:`HUNT_STICK` before the slip); a slip moves the piston by more than ten position-noise levels
+    and 0.1 % of the stroke (quantisation and noise do not slip). The stretch runs from
+    the stick phase before its first such slip to the end of the hold -- the moment a
+    stuck piston breaks away is decided by a small force margin, so a free-running
+    replay, whose break-aways fall elsewhere, loses the phase of the hunt from there
+    -- and from the start of the hold when the hold before it ended hunting (the
+    replay enters it off phase). Open loop (no reference): none.
+
+    Parameters
+    ----------
+    prep : the prepared recording. v_rest : m/s, speed below which the piston is at rest.
+    """
+    if not prep.closed or "r" not in prep.rec:
+        return []
+    r = np.asarray(prep.rec["r"], dtype=float)
+    x = prep.xs
+    cuts = np.flatnonzero(np.abs(np.diff(r)) > 1e-9 * max(prep.plant.stroke, 1e-9)) + 1
+    edges = np.unique(np.concatenate(([0], cuts, list(prep.starts or []), [len(r)]))).astype(int)
+    least = max(10.0 * prep.noise["x"], 1e-3 * prep.plant.stroke)
+    stick = max(int(round(HUNT_STICK / prep.dt)), 2)
+    moving = np.abs(prep.v) >= v_rest
+    out: list[tuple[int, int]] = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        xh = x[a:b]
+        slips = _slips(xh, moving[a:b], least)
+        # from a stick phase: the piston still (within the slip threshold; its velocity
+        # estimate may flicker above v_rest in the noise) for `stick` samples before it
+        again = [i for i in range(1, len(slips))
+                 if slips[i][0] - slips[i - 1][1] >= stick
+                 and np.ptp(xh[slips[i][0] - stick:slips[i][0]]) < least]
+        if not again:
+            continue
+        start = a if out and out[-1][1] == a and a not in (prep.starts or []) \
+            else a + slips[again[0] - 1][1]
+        if out and out[-1][1] == start:
+            out[-1] = (out[-1][0], int(b))
+        else:
+            out.append((int(start), int(b)))
+    return out
 
 
 def _check(prep: Prepared, sim: Mapping[str, np.ndarray]) -> ReplayCheck:
@@ -205,7 +299,7 @@ MODEL_FORM = {
 
 def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[str],
             sim_after: Mapping[str, np.ndarray], masks: Mapping[str, np.ndarray],
-            no_finding: Sequence[str] = ()
+            no_finding: Sequence[str] = (), hunt: Sequence[tuple[int, int]] = ()
             ) -> tuple[dict[str, dict[str, float]], list[str], list[str]]:
     """Never a silent all-clear.
 
@@ -215,6 +309,8 @@ def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[s
     findings : effect names found (in order). sim_after : the replay with them ({} if none).
     masks : operating regimes (:func:`.locate.regimes`).
     no_finding : why no candidate was significant (a note), when there is no finding.
+    hunt : stick-slip hunting stretches (sample ranges, :func:`hunting`): the remaining
+        error is also given outside them.
 
     Returns
     -------
@@ -254,8 +350,14 @@ def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[s
         if check1.worse:
             notes.append(f"even with the findings the replay {check1.cause()}")
         sim, label = sim_after, "the augmented model"
+    mask, text = None, ""
+    if hunt:
+        mask = np.zeros(prep.n, dtype=bool)
+        for a, b in hunt:
+            mask[a:b] = True
+        text = ", ".join(f"{prep.t[a]:.1f}-{prep.t[b - 1]:.1f} s" for a, b in hunt)
     remaining, still = unexplained({s: prep.measured(s) for s in prep.signals}, sim,
-                                   prep.noise, masks, prep.signals, label)
+                                   prep.noise, masks, prep.signals, label, mask, text)
     if still:
         still += [f"model-form limit of {f}: {MODEL_FORM[f]}" for f in dict.fromkeys(findings)
                   if f in MODEL_FORM]

@@ -85,7 +85,7 @@ def polish(prep: Prepared, base: PlantParams, cand: Candidate, values: Mapping[s
         from ..identify.grey_box import estimate
     except ImportError:             # pragma: no cover - estimator not built
         return None
-    if not prep.has_pressures or cand.name in SKIP:
+    if not prep.pressures or cand.name in SKIP:
         return None
     t0 = time.perf_counter()
     spans = _windows(prep, gain, WINDOW, WINDOWS)
@@ -93,8 +93,11 @@ def polish(prep: Prepared, base: PlantParams, cand: Candidate, values: Mapping[s
         return None
     recs = []
     for a, b in spans:
-        cols = {"u": prep.rec["u"][a:b], "x": prep.x[a:b], "p_a": prep.p_a[a:b],
-                "p_b": prep.p_b[a:b]}
+        # one side recorded: the other's force-balance estimate starts the replay,
+        # only the recorded signals are compared
+        cols = {"u": prep.rec["u"][a:b], "x": prep.x[a:b],
+                **{s: (prep.measured(s) if s in prep.pressures else prep.smoothed(s))[a:b]
+                   for s in ("p_a", "p_b")}}
         recs.append(Recording.from_arrays(prep.t[a:b] - prep.t[a],
                                           metadata={"sample_time": repr(prep.dt)}, **cols))
     pv = cand.plant_values(values)
@@ -116,7 +119,8 @@ def polish(prep: Prepared, base: PlantParams, cand: Candidate, values: Mapping[s
             bounds[k] = (lo, min(f.high, pv[k] * 10.0) if pv[k] > 0 else f.high)
     plant = Plant(base.replace(**pv))
     try:
-        res = estimate(plant, recs, keys, bounds=bounds or None, replay="open", max_iter=max_iter)
+        res = estimate(plant, recs, keys, signals=("x",) + prep.pressures, bounds=bounds or None,
+                       replay="open", max_iter=max_iter)
     except Exception as exc:  # noqa: BLE001 - a polish is optional; the refit's values stand
         from ..output import reraise_interrupt
         reraise_interrupt(exc)          # a Ctrl-C polled by CasADi is a stop, not a failed polish

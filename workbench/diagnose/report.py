@@ -60,8 +60,8 @@ def _summary_section(d) -> rp.Section:
           ("sample time", float(prep.dt) * 1e3, "ms"), ("replay", d.mode),
           ("signals compared", ", ".join(prep.signals)),
           ("position noise", prep.noise["x"] * 1e6, "um")]
-    if prep.has_pressures:
-        kv.append(("pressure noise", prep.noise["p_a"], "Pa"))
+    for side in prep.pressures:
+        kv.append((f"pressure noise {side}", prep.noise[side], "Pa"))
     kv.append(("diagnosis wall time", d.timings.get("total", float("nan")), "s"))
     blocks = [rp.KeyValues(kv)]
     fit_rows = [[s, d.fit_before[s]] + [f.fit_after.get(s) for f in d.findings]
@@ -140,7 +140,8 @@ def _remaining_section(d) -> rp.Section:
     """The final model's replay error against the noise floor, per signal and regime."""
     if not d.remaining:
         return rp.Section("What remains", [rp.Paragraph("No replay to compare.")])
-    regimes = [k for k in next(iter(d.remaining.values())) if k not in ("fit", "floor", "ratio")]
+    regimes = [k for k in next(iter(d.remaining.values()))
+               if k not in ("fit", "floor", "ratio", "hunting_share", "fit_outside_hunting")]
     def one(v):                         # one decimal in every column ("3.0", not "3")
         return "n/a" if v is None or not np.isfinite(v) else f"{v:.1f}"
     rows = [[s, one(r["fit"]), one(r["floor"]), one(r["ratio"])]
@@ -150,6 +151,16 @@ def _remaining_section(d) -> rp.Section:
                        caption="The replay of the final model against the noise floor (the fit "
                                "a perfect model reaches, from the recording's own noise), and "
                                "its error in noise units per operating regime")]
+    hunted = [(s, r) for s, r in d.remaining.items() if "fit_outside_hunting" in r]
+    if hunted:
+        spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in d.hunting)
+        blocks.append(rp.Table(
+            ["signal", "fit", "fit outside hunting", "mismatch in hunting"],
+            [[s, one(r["fit"]), one(r["fit_outside_hunting"]), one(100 * r["hunting_share"])]
+             for s, r in hunted], units=["", "%", "%", "%"],
+            caption=f"Stick-slip hunting ({spans}): the loop hunts against stiction around a "
+                    "held reference; a free-running replay cannot reproduce the phase of "
+                    "that limit cycle, so the fit is also given without those stretches"))
     for n in d.unexplained:
         blocks.append(rp.Status("NOTE", "still unexplained: " + n))
     if not d.unexplained:

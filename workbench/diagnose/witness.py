@@ -49,10 +49,12 @@ def observer_inputs(prep: Prepared) -> EngineInputs:
     d[row["u_rec"]] = prep.rec["u"]
     d[row["x_m"]] = prep.xs
     d[row["v_m"]] = prep.v
-    if prep.has_pressures:
+    if prep.pressures:        # one recorded: the other is its force-balance estimate
         d[row["p_a_m"]] = prep.pas
         d[row["p_b_m"]] = prep.pbs
         d[row["anchor_p"]] = 1.0
+    if prep.supply is not None:          # the recorded supply pressure, sample by sample
+        d[row["use_p_s"]], d[row["p_s_m"]] = 1.0, prep.supply
     d[row["anchor"]] = 1.0
     d[row["anchor_hidden"], 0] = 1.0
     return EngineInputs(d)
@@ -92,21 +94,19 @@ class Witness:
         sig_v = prep.noise["x"] * float(np.linalg.norm(cv))
         sig_a = prep.noise["x"] * float(np.linalg.norm(ca_))
         scale = {"v": max(sig_a, 1e-3)}
-        if prep.has_pressures:
-            scale["p_a"] = max(prep.noise["p_a"] * float(np.linalg.norm(cp)), 1.0)
-            scale["p_b"] = max(prep.noise["p_b"] * float(np.linalg.norm(cp)), 1.0)
-            cs = savgol_coeffs(prep.win_slow, 2, deriv=1, delta=dt)
-            scale["p_a_slow"] = max(prep.noise["p_a"] * float(np.linalg.norm(cs)), 1.0)
-            scale["p_b_slow"] = max(prep.noise["p_b"] * float(np.linalg.norm(cs)), 1.0)
+        cs = savgol_coeffs(prep.win_slow, 2, deriv=1, delta=dt)
+        for side in prep.pressures:     # the recorded sides only
+            scale[side] = max(prep.noise[side] * float(np.linalg.norm(cp)), 1.0)
+            scale[f"{side}_slow"] = max(prep.noise[side] * float(np.linalg.norm(cs)), 1.0)
         v_rest = max(3.0 * sig_v, 1e-3)
         rest = np.abs(prep.v) < v_rest
         quiet = np.zeros(n, dtype=bool)
-        if prep.has_pressures:
+        if prep.pressures:
             # Slow channels only where the pressures change slowly: the long window
             # cannot follow a transient, so there it would compare smoothing errors.
-            rate = np.maximum(np.abs(prep.smooth_slow(prep.p_a, 1)),
-                              np.abs(prep.smooth_slow(prep.p_b, 1)))
-            calm = rate < 3.0 * np.median(rate) + 3.0 * scale["p_a_slow"]
+            rate = np.max([np.abs(prep.smooth_slow(prep.measured(s), 1))
+                           for s in prep.pressures], axis=0)
+            calm = rate < 3.0 * np.median(rate) + 3.0 * scale[f"{prep.pressures[0]}_slow"]
             calm &= np.abs(prep.smooth_slow(prep.v)) < 10.0 * v_rest
             # dilate the transients by one long window
             k = prep.win_slow
@@ -146,11 +146,12 @@ class Witness:
             res["v"] = r
         else:
             res["v"] = prep.a - prep.smooth_x(dv)
-        if prep.has_pressures:
-            res["p_a"] = prep.dpa - prep.smooth_p(np.asarray(rates[1], dtype=float))
-            res["p_b"] = prep.dpb - prep.smooth_p(np.asarray(rates[2], dtype=float))
-            res["p_a_slow"] = prep.smooth_slow(prep.p_a, 1) - prep.smooth_slow(np.asarray(rates[1]))
-            res["p_b_slow"] = prep.smooth_slow(prep.p_b, 1) - prep.smooth_slow(np.asarray(rates[2]))
+        for side in prep.pressures:     # the recorded sides only
+            i = ("p_a", "p_b").index(side) + 1
+            rate = np.asarray(rates[i], dtype=float)
+            res[side] = (prep.dpa if side == "p_a" else prep.dpb) - prep.smooth_p(rate)
+            res[f"{side}_slow"] = (prep.smooth_slow(prep.measured(side), 1)
+                                   - prep.smooth_slow(rate))
         return res
 
     def cost(self, res: Mapping[str, np.ndarray]) -> float:
@@ -175,12 +176,12 @@ class Witness:
         prep = self.prep
         prm = prep.plant.params
         out = {"force": prm["load.mass"] * res["v"]}
-        if prep.has_pressures:
+        if prep.pressures:
             k, T = prm["gas.polytropic_index"], prm["gas.temperature"]
             plant = prep.plant
-            vol_a, vol_b, _, _ = chamber.volumes(
+            vol = dict(zip(("p_a", "p_b"), chamber.volumes(
                 prep.xs, 0.0, plant.area_a, plant.area_b, plant.stroke,
-                prm["cylinder.dead_volume_a"], prm["cylinder.dead_volume_b"])
-            out["q_a"] = vol_a / (k * R_AIR * T) * res["p_a"]
-            out["q_b"] = vol_b / (k * R_AIR * T) * res["p_b"]
+                prm["cylinder.dead_volume_a"], prm["cylinder.dead_volume_b"])[:2]))
+            for side in prep.pressures:
+                out[f"q_{side[-1]}"] = vol[side] / (k * R_AIR * T) * res[side]
         return out
