@@ -185,3 +185,17 @@ def test_foreign_rig_deadband_and_spool_lag_are_both_named(tmp_path):
     assert set(found) == {"valve_deadband", "valve_dynamics"}, d.summary()
     assert found["valve_deadband"].parameters["deadband"] == pytest.approx(0.06, rel=0.15)
     assert found["valve_dynamics"].parameters["bandwidth"] == pytest.approx(20.0, rel=0.15)
+
+
+def test_an_unidentified_log_value_gets_an_open_interval_not_a_crash():
+    """A value the recording does not identify (position only: the Stribeck velocity
+    beside an offset) has a Gauss-Newton std of hundreds in log coordinates; its 95 %
+    interval is (0, inf). Before, exp(1.96 std) overflowed and the whole candidate --
+    dry friction on a position-only recording -- was dropped as failed."""
+    from workbench.diagnose.candidates import Free
+    from workbench.diagnose.refit import _uncertainty
+    f = Free("friction.stribeck_velocity", 1e-3, 0.2, 0.01)
+    J = np.full((50, 1), 1e-5)          # cost flat in this value: std ~ 1/(1e-5 sqrt(50))
+    std, ci, _ = _uncertainty((f,), {f.key: 0.01}, J, np.ones(50), 50.0)
+    assert ci[f.key][1] == math.inf and 0.0 <= ci[f.key][0] < 1e-300
+    assert std[f.key] > 1.0

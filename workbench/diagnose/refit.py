@@ -258,7 +258,8 @@ def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
         v = vals[f.key]
         if f.log:
             std[f.key] = v * sz
-            ci[f.key] = (v * math.exp(-1.96 * sz), v * math.exp(1.96 * sz))
+            e = min(1.96 * sz, 700.0)     # an unidentified value: (0, inf), not a crash
+            ci[f.key] = (v * math.exp(-e), v * math.exp(e) if e < 700.0 else math.inf)
         else:
             std[f.key] = f.scale * sz
             ci[f.key] = (v - 1.96 * f.scale * sz, v + 1.96 * f.scale * sz)
