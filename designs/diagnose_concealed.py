@@ -24,6 +24,7 @@ Usage::
     python designs/diagnose_concealed.py            # 20 cases (each kind twice), ~10 min
     python designs/diagnose_concealed.py --quick    # 3 short cases (smoke test)
     python designs/diagnose_concealed.py --cases 10 --seed 7 --out reports/x
+    python designs/diagnose_concealed.py --only "valve_deadband + valve_offset,nominal errors"
 
 Writes ``reports/diagnose_concealed/report.html`` and ``report.pdf``, ``summary.json``
 and ``cases/NN/{plant.toml, recording.csv, diagnosis/...}``. The verdict (quick mode
@@ -264,7 +265,7 @@ def select_cases(cases: list[dict], only: str | None) -> list[tuple[int, dict]]:
     Raises
     ------
     SystemExit
-        (through argparse's convention, exit code 2) a label matching no case, with the
+        (exit status 1, the message on stderr) a label matching no case, with the
         labels there are.
     """
     indexed = list(enumerate(cases))

@@ -199,3 +199,23 @@ def test_an_unidentified_log_value_gets_an_open_interval_not_a_crash():
     std, ci, _ = _uncertainty((f,), {f.key: 0.01}, J, np.ones(50), 50.0)
     assert ci[f.key][1] == math.inf and 0.0 <= ci[f.key][0] < 1e-300
     assert std[f.key] > 1.0
+
+
+def test_design_script_runs_chosen_set_cases_by_label():
+    """``--only``: labels as in the sets table, a pair's members in any order, spaces
+    optional; each case keeps its index (its seed and folder) in the full list; an
+    unknown label stops with the labels there are."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "designs" / "diagnose_concealed.py"
+    spec = importlib.util.spec_from_file_location("diagnose_concealed_only", path)
+    dc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(dc)
+    cases = [{"label": "valve_deadband + valve_offset"}, {"label": "nominal errors"},
+             {"label": "position only: dry_friction + valve_offset"}]
+    got = dc.select_cases(cases, "valve_offset+valve_deadband, Position only: "
+                                 "valve_offset + dry_friction")
+    assert [i for i, _ in got] == [0, 2]
+    assert dc.select_cases(cases, None) == list(enumerate(cases))
+    with pytest.raises(SystemExit, match="no set case named 'deadband\\+offset'.*nominal errors"):
+        dc.select_cases(cases, "deadband+offset")

@@ -3,9 +3,10 @@ refitted jointly and compared on one footing.
 
 A rig rarely has one missing effect. After every candidate was refitted alone
 (:mod:`.explain`), pairs are refitted **jointly** (all their values free at once,
-started from the single fits): the best single with every other candidate that
-explains anything alone (dBIC > 0; a weak second effect may rank low alone, behind
-proxies of the first) and every pair of the
+started from the single fits, from each single with the other member at its neutral
+values, and from each member's grid in turn): the best single with every other
+candidate (a weak second effect may explain nothing alone beside the first one's
+mismatch) and every pair of the
 most promising ones (:data:`POOL`); then, when the best pair's members both earn
 their place (below), triples: that pair with each of those and of the members of the
 next best pairs. Like the singles, every set is first
@@ -35,7 +36,8 @@ nominal mismatch only it removes), also given as a share of what the others leav
 :data:`~.explain.DBIC_MIN` of the chosen one's BIC -- as explanations the recording
 cannot tell apart. Both come with the data that would separate them
 (:func:`tells_apart`): the operating regimes where the members only one side has
-show, and the share of this recording spent in them.
+show, and the share of this recording spent in them. A member significant by BIC on
+top of the chosen set but below the share rule is *said* (:func:`suggested`), not named.
 """
 
 from __future__ import annotations
