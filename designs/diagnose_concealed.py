@@ -308,8 +308,16 @@ def run_set_case(i: int, case: dict, seed: int, out: Path, duration: float) -> d
     if proc.returncode != 0:
         return {**row, "named": ["error"], "correct": False,
                 "error": proc.stderr.strip().splitlines()[-1] if proc.stderr else "failed"}
-    res = json.loads(proc.stdout)
-    details = json.loads((d / "diagnosis" / "details.json").read_text())
+    return score_set_case(row, case, d / "diagnosis")
+
+
+def score_set_case(row: dict, case: dict, out: Path) -> dict:
+    """``row`` completed from the diagnosis written to ``out`` (diagnosis.json,
+    details.json, plant.augmented.toml) against the concealed ``case``: effects named,
+    said and reported as an alternative, value errors, fits, noise floor."""
+    res = json.loads((out / "diagnosis.json").read_text())
+    details = json.loads((out / "details.json").read_text())
+    d = out.parent
     from workbench.params import PlantParams
     aug = PlantParams.from_toml(d / "diagnosis" / "plant.augmented.toml")
     named = sorted({f["effect"] for f in res["findings"]} - {"parameter_error"})
@@ -321,8 +329,12 @@ def run_set_case(i: int, case: dict, seed: int, out: Path, duration: float) -> d
     said = sorted({effect_of.get(g["member"], g["member"])
                    for g in details.get("sets", {}).get("suggested", [])}
                   - {"parameter_error"} - set(named))
+    # the concealed set among the alternatives the data cannot tell from the chosen one
+    alts = [sorted({effect_of.get(m, m) for m in alt} - {"parameter_error"})
+            for alt in details.get("sets", {}).get("alternatives", [])]
+    trade_off = sorted(case["effects"]) in alts and named != sorted(case["effects"])
     return {**row, "named": named or ["none"], "correct": named == sorted(case["effects"]),
-            "suggested": said,
+            "suggested": said, "trade_off_reported": trade_off,
             "named_or_said": sorted(set(named) | set(said)) == sorted(case["effects"]),
             "parameter_error": [f for f in res["findings"] if f["effect"] == "parameter_error"],
             "relative_errors": errors, "fit_before": res["fit_before"],
@@ -351,7 +363,9 @@ def sets_section(rows: list[dict]) -> tuple[rp.Section, bool, str]:
         if "error" in r:
             fits = [r["error"], "", ""]
         table.append([r["case"], r["label"], ", ".join(r["named"]), bool(r.get("correct")),
-                      ", ".join(r.get("suggested") or []) or "-",
+                      "; ".join(([", ".join(r["suggested"])] if r.get("suggested") else [])
+                                + (["the concealed set as an alternative"]
+                                   if r.get("trade_off_reported") else [])) or "-",
                       err or "-", *fits, r.get("candidate_models"),
                       f"{float(r['wall_s']):.1f}"])
     tab = rp.Table(["#", "concealed", "effects named", "correct", "also said", "value error",
@@ -362,7 +376,8 @@ def sets_section(rows: list[dict]) -> tuple[rp.Section, bool, str]:
                            "only and open loop: effects named (parameter_error not listed) "
                            "vs concealed; also said: significant by BIC beside the named "
                            "ones but below the share a finding needs (reported as such, "
-                           "not named); relative error of each concealed value in "
+                           "not named), or the concealed set reported as an alternative "
+                           "within the BIC margin (a trade-off); relative error of each concealed value in "
                            "plant.augmented.toml; fit per signal before -> after (noise "
                            "floor: the fit a perfect model reaches)")
     effects = sorted({e for r in rows for e in (*r["concealed"], *r["named"])} - {"none"})
@@ -371,17 +386,22 @@ def sets_section(rows: list[dict]) -> tuple[rp.Section, bool, str]:
         hid = [r for r in rows if e in r["concealed"]]
         conf.append([e, len(hid), sum(1 for r in hid if e in r["named"]),
                      sum(1 for r in hid if e not in r["named"]),
+                     sum(1 for r in hid if e in (r.get("suggested") or [])),
                      sum(1 for r in rows if e in r["named"] and e not in r["concealed"])])
     conf_tab = rp.Table(["effect", "concealed in", "named there", "missed",
-                         "named, not concealed"], conf,
-                        units=["", "cases", "cases", "cases", "cases"],
+                         "missed, said", "named, not concealed"], conf,
+                        units=["", "cases", "cases", "cases", "cases", "cases"],
                         caption="Per effect over the sets above: cases that concealed it, "
-                                "how many of those named it and missed it, and cases that "
+                                "how many of those named it and missed it (and of those, "
+                                "said it as significant but not named), and cases that "
                                 "named it without concealing it (spurious)")
     said = [r for r in rows if not r.get("correct") and r.get("named_or_said")]
+    alt = [r for r in rows if r.get("trade_off_reported")]
     text = f"{len(ok)}/{len(rows)} sets named exactly" + (
         f", {len(said)} more with the missing effect said as significant but not named"
-        if said else "")
+        if said else "") + (
+        f", {len(alt)} with the concealed set reported as an alternative the recording "
+        "cannot tell apart (trade-off)" if alt else "")
     return rp.Section("Sets of effects and wrong nominal values",
                       [rp.Paragraph(text), tab, conf_tab]), len(ok) == len(rows), text
 
