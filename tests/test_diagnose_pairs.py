@@ -219,3 +219,25 @@ def test_design_script_runs_chosen_set_cases_by_label():
     assert dc.select_cases(cases, None) == list(enumerate(cases))
     with pytest.raises(SystemExit, match="no set case named 'deadband\\+offset'.*nominal errors"):
         dc.select_cases(cases, "deadband+offset")
+
+
+def test_sets_table_counts_said_and_trade_offs_apart_from_named():
+    """A missing effect said as significant (not named) and a concealed set reported as
+    an alternative are counted as such, never as named exactly."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "designs"))
+    import diagnose_concealed as dc
+    rows = [{"case": 0, "label": "l + s", "concealed": ["line_dynamics", "supply_droop"],
+             "named": ["line_dynamics"], "correct": False, "suggested": ["supply_droop"],
+             "named_or_said": True, "wall_s": 1.0},
+            {"case": 1, "label": "a + b", "concealed": ["leakage", "valve_offset"],
+             "named": ["leakage", "parameter_error"], "correct": False, "suggested": [],
+             "trade_off_reported": True, "wall_s": 1.0}]
+    section, all_ok, text = dc.sets_section(rows)
+    got = {r[0]: tuple(r[1:]) for r in section.blocks[2].rows}
+    assert got["supply_droop"] == (1, 0, 1, 1, 0)
+    assert text == ("0/2 sets named exactly, 1 more with the missing effect said as "
+                    "significant but not named, 1 with the concealed set reported as an "
+                    "alternative the recording cannot tell apart (trade-off)")
+    assert all_ok is False
