@@ -241,3 +241,33 @@ def test_sets_table_counts_said_and_trade_offs_apart_from_named():
                     "significant but not named, 1 with the concealed set reported as an "
                     "alternative the recording cannot tell apart (trade-off)")
     assert all_ok is False
+
+
+def test_a_pairs_scan_takes_each_members_grid_on_top_of_the_best_so_far():
+    """Both singles distorted (a deadband fitted 0.13 beside 3.6 m lines it mimics, the
+    lines at their range edge): the scan of one member's grid with the other at its
+    single value finds neither. Each member's grid is scanned on top of the best point
+    so far, so the start holds the best grid value of both. Checked on a separable cost
+    whose minimum (deadband 0.05, offset 0.2 V) is on both grids: the start point is
+    exactly there (before: one member at its grid value, the other at its single's)."""
+    from types import SimpleNamespace
+    from workbench.diagnose.candidates import candidates
+    from workbench.diagnose.refit import _start_point
+    from workbench.diagnose.sets import combine
+    params = synth.concealed_case("none", seed=0).nominal
+    by = {c.name: c for c in candidates(params, ["valve_deadband", "valve_offset"])}
+    db, off = by["valve_deadband"], by["valve_offset"]
+    pair = combine([db, off], {"valve.deadband": 0.13, "valve.null_offset": 0.9},
+                   scan=[db, off])
+
+    def cost(vals):
+        return 1e4 * (vals["valve.deadband"] - 0.05) ** 2 \
+            + 1e2 * (vals["valve.null_offset"] - 0.2) ** 2
+    obj = SimpleNamespace(cand=pair, cost=cost,
+                          lo=np.array([f.z_bounds[0] for f in pair.free]),
+                          hi=np.array([f.z_bounds[1] for f in pair.free]))
+    z0, grid = _start_point(obj, None)
+    start = pair.values(z0)
+    assert start["valve.deadband"] == pytest.approx(0.05, rel=1e-6)
+    assert start["valve.null_offset"] == pytest.approx(0.2, rel=1e-6)
+    assert len(grid) == 1 + len(db.grid_points()) + len(off.grid_points())
