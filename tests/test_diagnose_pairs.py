@@ -271,3 +271,21 @@ def test_a_pairs_scan_takes_each_members_grid_on_top_of_the_best_so_far():
     assert start["valve.deadband"] == pytest.approx(0.05, rel=1e-6)
     assert start["valve.null_offset"] == pytest.approx(0.2, rel=1e-6)
     assert len(grid) == 1 + len(db.grid_points()) + len(off.grid_points())
+
+
+def test_a_pair_is_refitted_from_the_best_triple_with_the_third_member_neutral():
+    """A third member must not earn its place by making up for a pair stuck in a local
+    minimum: once the best triple is fitted, each pair inside it is refitted also from
+    the triple's values with the left-out member at its neutral values (no leak)."""
+    costs = {("valve_deadband",): 4955.0, ("valve_offset",): 3.6e6, ("leakage",): 3e6,
+             ("valve_deadband", "valve_offset"): 19.8,
+             ("leakage", "valve_deadband"): 4843.0,
+             ("leakage", "valve_deadband", "valve_offset"): 7.95}
+    _, _, fake, by = _search(costs, ["valve_deadband", "valve_offset", "leakage"], j0=4.9e6)
+    pair = frozenset(["valve_deadband", "valve_offset"])
+    triple = frozenset(["valve_deadband", "valve_offset", "leakage"])
+    last_triple = max(i for i, a in enumerate(fake.asked) if a == triple)
+    # refitted after the triple, from a start point holding the triple's pair values
+    assert any(a == pair for a in fake.asked[last_triple + 1:])
+    assert {"valve.deadband": by["valve_deadband"].free[0].start,
+            "valve.null_offset": by["valve_offset"].free[0].start} in fake.points[pair]
