@@ -74,6 +74,12 @@ class Candidate:
     grid : values (key -> list) whose combinations are scanned for the signature.
     needs_pressures : only visible in the chamber pressures.
     describe : one line for the report.
+    neutral : values at which the candidate changes the model least (see
+        :meth:`neutral_values`).
+    size : the values whose neutral values make the effect vanish whatever the others
+        (Coulomb force, deadband width, leak conductances, ...); empty when no value
+        does (heat transfer: its least value is adiabatic, not the nominal polytropic
+        chamber).
     """
 
     name: str
@@ -83,6 +89,8 @@ class Candidate:
     grid: Mapping[str, Sequence[float]] = field(default_factory=dict)
     needs_pressures: bool = False
     describe: str = ""
+    neutral: Mapping[str, float] = field(default_factory=dict)
+    size: tuple[str, ...] = ()
 
     @property
     def k(self) -> int:
@@ -108,6 +116,16 @@ class Candidate:
             out["friction.static"] = float(values["friction.coulomb"]
                                            * (1.0 + values["friction.static_excess"]))
         return out
+
+    def neutral_values(self) -> dict[str, float]:
+        """The values (candidate keys) at which this candidate changes the nominal model
+        least: its ``neutral`` values (no leak, no offset, the narrowest deadband, ...),
+        for a nominal-value correction the plant file's values. A set of candidates
+        contains each of its subsets as the special case with the left-out member at
+        these values (:mod:`.sets` starts a joint fit there too)."""
+        if self.effect == "parameter_error":
+            return {f.key: f.start for f in self.free}
+        return dict(self.neutral)
 
     def apply(self, params: PlantParams, values: Mapping[str, float]) -> PlantParams:
         """The nominal parameters with this candidate added at ``values``."""
@@ -195,11 +213,14 @@ def _valve_and_friction(sc: _Scales) -> list[Candidate]:
             grid={"friction.coulomb": [f_max * s for s in (0.015, 0.04, 0.08, 0.15, 0.3)],
                   "friction.static_excess": [0.0, 0.5],
                   "friction.stribeck_velocity": [0.01]},
+            neutral={"friction.coulomb": 1e-3 * f_max, "friction.static_excess": 0.0,
+                     "friction.stribeck_velocity": 0.01}, size=("friction.coulomb",),
             describe="Coulomb and static (break-away) friction with a Stribeck curve"),
         Candidate(
             "valve_deadband", "valve_deadband",
             (Free("valve.deadband", 0.002, 0.45, 0.03),),
             grid={"valve.deadband": [0.01, 0.025, 0.05, 0.08, 0.12, 0.2]},
+            neutral={"valve.deadband": 0.002}, size=("valve.deadband",),
             describe="spool overlap: no flow for commands near the centre"),
         Candidate(
             "valve_offset", "valve_offset",
@@ -207,11 +228,14 @@ def _valve_and_friction(sc: _Scales) -> list[Candidate]:
                   scale=0.02 * span),),
             grid={"valve.null_offset": [s * span for s in (-0.08, -0.04, -0.02, -0.01,
                                                             0.01, 0.02, 0.04, 0.08)]},
+            neutral={"valve.null_offset": 0.0}, size=("valve.null_offset",),
             describe="the spool is centred at another command than command_center"),
         Candidate(
             "valve_dynamics", "valve_dynamics",
             (Free("valve.bandwidth", 2.0, 400.0, 40.0), Free("valve.damping", 0.2, 3.0, 0.8)),
             grid={"valve.bandwidth": [8.0, 20.0, 50.0], "valve.damping": [0.7]},
+            neutral={"valve.bandwidth": 400.0, "valve.damping": 0.8},
+            size=("valve.bandwidth",),
             needs_pressures=False,
             describe="the spool follows the command through a 2nd-order lag"),
     ]
@@ -226,6 +250,8 @@ def _air_path(sc: _Scales) -> list[Candidate]:
             (Free("lines.length", 0.05, 30.0, 1.0), Free("lines.diameter", 1.5e-3, 15e-3, 4e-3)),
             fixed={"lines.segments": LINE_SEGMENTS},
             grid={"lines.length": [0.7, 2.0, 5.0], "lines.diameter": [3e-3, 5e-3]},
+            neutral={"lines.length": 0.05, "lines.diameter": 4e-3},
+            size=("lines.length",),
             needs_pressures=False,     # its volume and delay show in the position too
             describe="valve-chamber lines: extra volume, transport delay, pressure drop"),
         # leak conductances scaled with the valve: 1e-4 .. 0.03 of one valve edge
@@ -237,6 +263,8 @@ def _air_path(sc: _Scales) -> list[Candidate]:
             grid={"leakage.conductance_to_atmosphere": [c_valve * s for s in
                                                         (0.0, 5e-4, 1.5e-3, 4e-3, 1e-2)],
                   "leakage.cross_piston": [0.0, 3e-9]},
+            neutral={"leakage.conductance_to_atmosphere": 0.0, "leakage.cross_piston": 0.0},
+            size=("leakage.conductance_to_atmosphere", "leakage.cross_piston"),
             needs_pressures=True,
             describe="leaks from the chambers to atmosphere and across the piston"),
         Candidate(
@@ -246,12 +274,17 @@ def _air_path(sc: _Scales) -> list[Candidate]:
                   0.3 * c_valve)),
             grid={"supply.reservoir_volume": [v_chamber * s for s in (0.5, 3.0, 20.0)],
                   "supply.regulator_conductance": [c_valve * s for s in (0.08, 0.25, 0.8)]},
+            neutral={"supply.reservoir_volume": 500 * v_chamber,
+                     "supply.regulator_conductance": 20.0 * c_valve},
+            size=("supply.regulator_conductance",),
             needs_pressures=True,
             describe="the supply pressure sags under flow (reservoir behind a regulator)"),
         Candidate(
             "heat_transfer", "heat_transfer",
             (Free("gas.heat_transfer_coefficient", 1e-3, 50.0, 0.5),),
             grid={"gas.heat_transfer_coefficient": [0.05, 0.3, 1.5, 8.0]},
+            # no value is the nominal polytropic chamber exactly: the least heat transfer
+            neutral={"gas.heat_transfer_coefficient": 1e-3},
             needs_pressures=True,
             describe="chamber gas temperature varies (adiabatic when fast, isothermal when "
                      "slow)"),

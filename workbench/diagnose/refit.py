@@ -279,11 +279,14 @@ def _start_point(obj: _Objective, start: Mapping[str, float] | None
     cand = obj.cand
     grid: list[tuple[dict[str, float], float]] = []
     if start is None:
+        # each point on top of the best so far: a joint candidate's members' grids are
+        # scanned one after the other (a grid point sets all of its candidate's scanned
+        # values, so a single candidate's scan is unchanged)
+        best = cand.values(cand.z0())
         for point in cand.grid_points():
-            vals = dict(cand.values(cand.z0()))
-            vals.update(point)
+            vals = {**(min(grid, key=lambda g: g[1])[0] if grid else best), **point}
             grid.append((vals, obj.cost(vals)))
-        best = min(grid, key=lambda g: g[1])[0] if grid else cand.values(cand.z0())
+        best = min(grid, key=lambda g: g[1])[0] if grid else best
     else:
         best = {**cand.values(cand.z0()), **start}
     return np.clip(cand.z0(best), obj.lo + 1e-9, obj.hi - 1e-9), grid
@@ -327,7 +330,8 @@ def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
         v = vals[f.key]
         if f.log:
             std[f.key] = v * sz
-            ci[f.key] = (v * math.exp(-1.96 * sz), v * math.exp(1.96 * sz))
+            e = min(1.96 * sz, 700.0)     # an unidentified value: (0, inf), not a crash
+            ci[f.key] = (v * math.exp(-e), v * math.exp(e) if e < 700.0 else math.inf)
         else:
             std[f.key] = f.scale * sz
             ci[f.key] = (v - 1.96 * f.scale * sz, v + 1.96 * f.scale * sz)

@@ -130,6 +130,8 @@ def _set_blocks(d) -> list:
         out.append(rp.Status("NOTE", "an alternative explains the recording about as well "
                                      f"(BIC within {DBIC_MIN:g}): {' + '.join(alt)}; the data cannot "
                                      "tell it from the chosen set"))
+    for sg in info.get("suggested", []):
+        out.append(rp.Status("NOTE", "also significant, not named: " + sg["text"]))
     for t in info.get("trade_offs", []):
         out.append(rp.Status("NOTE", f"{t['values'][0]} and {t['values'][1]} trade off "
                                      f"(correlation {t['correlation']:+.2f}): {t['tells_apart']}"))

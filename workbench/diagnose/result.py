@@ -146,6 +146,8 @@ class Diagnosis:
         if self.sets:
             lines.append(f"  {self.sets.get('candidate_models', 0)} candidate models evaluated "
                          "(single effects, pairs and triples)")
+        for sg in self.sets.get("suggested", []) if self.sets else ():
+            lines.append(f"  also significant, not named: {sg['text']}")
         for n in self.unexplained:
             lines.append(f"  still unexplained: {n}")
         for n in self.notes:
