@@ -8,7 +8,7 @@ workbench: its own segment layout), scipy's LSODA, a 12-bit position ADC and 300
 pressure noise drawn by the loop, not by workbench.controllers.sensors. Two 60 mm steps
 and their holds (3.3 s).
 
-Measured 2026-11-24 (this profile, seed 0): steady state 0.093 / 0.008 mm (quantum
+Measured 2026-11-24 (the first two holds of the 10.8 s profile, seed 0): steady state 0.093 / 0.021 mm (quantum
 0.122 mm), no command activity over the holds' second halves. The same controller
 with the hold lock it replaced (valve closed within half a quantum, released beyond
 two): 0.039 / 0.057 mm on this rig, but on the lumped-line LuGre rig 0.178 mm and on

@@ -56,9 +56,10 @@ would raise the force by F_s in one width, without the line's limit: a starting 
 No limit cycle. In a hold the loop is closed only through discrete pulses, each sent
 on a stuck, unloaded piston and followed by the force loop until the piston is still
 and the force steady again: there is no continuous position feedback to sustain an
-oscillation, and after ``max_pulses`` pulses in one hold the hold stops pulsing
-(termination by construction; the piston is then held where it is, off the quantum,
-and the steady-state error says so). A bracket that keeps overshooting narrows
+oscillation. A pulse that brings the piston closer to the target's bin shortens the
+distance by at least a quantum (at most ``range`` / q of them); after ``max_pulses``
+others in one hold the hold stops pulsing (termination by construction; the piston is
+then held where it is, off the quantum, and the steady-state error says so). A bracket that keeps overshooting narrows
 geometrically. What the bisection cannot remove is the smallest move a bump that
 breaks the piston away makes: on the precision rig (F_s - F_c = 10 N, 1 m lines)
 about 0.1-0.3 mm, one to three quanta, so a stop is not certain to land in the target's
@@ -111,7 +112,8 @@ class HoldPositioner:
     area_a, area_b : m^2. p_atm : Pa. external_force : N (the net force's terms).
     max_width : int, longest pulse half, samples.
     reverse : the reverse half's length as a share of the forward half's.
-    max_pulses : int, pulses per hold before the hold stops trying.
+    max_pulses : int, pulses per hold that did not bring the piston closer (no move,
+        or past the target's bin) before the hold stops trying.
     """
 
     quantum: float
@@ -275,6 +277,8 @@ class HoldPositioner:
             lo = max(lo, a)
         elif e * s["dir"] < -0.5 * self.quantum:          # past the target's bin
             hi = min(hi, a)
+        else:                                             # closer: not counted as a try
+            s["tries"] = max(0, s.get("tries", 0) - 1)
         if lo >= hi:                                      # outcomes scatter: reopen
             lo, hi = 0.8 * hi, 1.25 * lo
         s[key], s["hi" + key[2]] = lo, hi
