@@ -21,7 +21,7 @@ error / holds free of a limit cycle (quantum 0.122 mm):
   3     0.118 / 1.03 mm / yes       0.047 / 0.83 mm / yes
   4     0.240 / 0.86 mm / yes       0.049 / 0.65 mm / yes
   perturbed rig (friction 1.5x, mass +10 %):
-        0.403 / 1.64 mm / NO        1.078 / 2.13 mm / NO (hold 3; the 4 s hold at rest)
+        0.403 / 1.64 mm / NO        1.078 / 1.51 mm / NO (hold 3; the 4 s hold at rest)
 
 (the hold lock: valve closed once within half a quantum, released beyond two.) Every
 seed now settles within one quantum after every step without a limit cycle. Not met:
@@ -29,7 +29,7 @@ the sine's worst error <= 1 mm on every seed (its worst point is the start of th
 from a hold: the hold leaves the net force near zero and the NMPC must first build the
 static friction, 1.0-1.4 mm in the first 0.1 s, seed 0; the reversals 0.8 mm), and the
 perturbed rig (static friction 37.5 N: a pulse that breaks it away moves it 0.3-1 mm,
-several quanta; hold 3 hunts in pulses, 28 command changes in its second half, and
+several quanta; hold 3 hunts in pulses, 51 command changes in its second half, and
 ends 1.1 mm off). Strict xfails record both.
 
 Tried and not kept (same profile): a hold that only closes the valve (a piston stuck
@@ -152,7 +152,7 @@ def test_perturbed_rig_ends_at_rest(perturbed):
 
 @pytest.mark.xfail(strict=True, reason="issue 14 open: on the perturbed rig (static friction "
                    "37.5 N) the third hold ends 1.08 mm off after pulsing through its second "
-                   "half (28 command changes)")
+                   "half (51 command changes)")
 def test_perturbed_rig_settles_without_limit_cycle(perturbed):
     ev = perturbed
     assert max(h["steady_state_error"] for h in _steps(ev)) <= ev.quantum
