@@ -7,7 +7,9 @@
    with 300 Pa white noise, no velocity.
 2. Each controller is what ``workbench.controllers.design(plant, kind)`` returns from
    the plant file alone: a Kalman observer (velocity and unmodelled force from x,
-   p_a, p_b), the deadband inverted, a hold lock against stick-slip hunting, the
+   p_a, p_b), the deadband inverted, a precision hold against stick-slip hunting
+   (workbench.controllers.hold: net force held at zero, locked on the target's
+   quantum, a stuck piston moved by adapted force pulses), the
    reference smoothed to the axis's limits and fed forward (FL and NMPC), the plant
    file's dry friction fed forward at the reference's velocity (FL; the NMPC
    predicts with it).
@@ -162,12 +164,19 @@ def _seed_section(seeds: dict) -> "rp.Section":
                      "yes" if f["limit_cycle_free"] else "NO", "pass" if f["passed"] else "FAIL"])
     return rp.Section("NMPC: other sensor-noise realisations", [
         rp.Paragraph("The same NMPC on the same rig, with the position quantiser and the "
-                     "pressure noise drawn from other seeds. The figures scatter because the "
-                     "outcome of each stop depends on stick-slip events: the hold lock closes "
-                     "the valve only when a stop lands within half a quantum, and a stuck "
-                     "piston that breaks away moves 0.3-1 mm (the static friction's excess "
-                     "over the Coulomb level is released at once). A design is judged by its "
-                     "worst seed, not by seed 0."),
+                     "pressure noise drawn from other seeds. Each stop is decided by "
+                     "stick-slip: a stuck piston breaks away and jumps 0.3-1 mm when its "
+                     "force is raised through the static friction, more than the quantum "
+                     "a stop must land in. The precision hold (controllers.hold) therefore "
+                     "holds the net force at zero once the piston is slow or still near "
+                     "its target, locks it when it is in the target's quantum, and moves "
+                     "a piston stuck outside by force pulses (a bump that ends on its own, "
+                     "strength bisected between no move and overshoot) with the valve "
+                     "closed in between: there is no continuous position feedback in a "
+                     "hold to sustain a limit cycle. The smallest move a breaking-away "
+                     "bump makes on this rig is 0.1-0.3 mm (1 m lines), so landing in the "
+                     "quantum can take several pulses. A design is judged by its worst "
+                     "seed, not by seed 0."),
         rp.Table(["seed", "steady state worst", "steady state median", "overshoot",
                   "sine worst", "no limit cycle", "precision spec"], rows,
                  units=["", "mm", "mm", "%", "mm", "", ""],

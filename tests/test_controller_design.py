@@ -88,6 +88,8 @@ def test_designed_controllers_need_no_velocity(rig, kind):
     ctrl = design(plant, kind, jit=False)     # CasADi's VM: no compile in a fresh CI
     assert ctrl.needs == ("x", "p_a", "p_b")
     assert isinstance(ctrl.inner, Compensated) and ctrl.inner.lock_band > 0
+    # dry friction in the plant file: the precision hold, its band one quantum wide
+    assert ctrl.inner.hold is not None and ctrl.inner.hold.quantum == 2 * ctrl.inner.lock_band
     ref = steps([0.25, 0.28], hold=1.5)
     run = simulate.closed_loop(plant, RigSensors(ctrl, stroke=plant.stroke), ref, x0=0.25)
     # a 30 mm step reached within 2 mm (every law, 10 ms, friction and deadband)

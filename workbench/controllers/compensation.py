@@ -13,7 +13,12 @@
   the *desired* velocity: F_c tanh(v / v_e) + (F_s - F_c) exp(-(v / v_s)^2) tanh(v /
   v_e) with v_e = v_s / 10.
 * :class:`Compensated` -- wraps a controller: applies the deadband inverse to its
-  command and **closes the valve at a hold** once the piston has stopped within
+  command and, with a :class:`~.hold.HoldPositioner` (``hold``; what
+  :func:`~.design.design` gives a plant with dry friction), hands a hold over to it:
+  net force held at zero, locked on the target's quantum, a stuck piston pulsed in
+  (module :mod:`workbench.controllers.hold` says why, and why no limit cycle). Without
+  one (the older lock, kept for callers that set ``lock_band``) it **closes the valve
+  at a hold** once the piston has stopped within
   half a position quantum of a stationary reference (``lock_band``), until the error
   exceeds ``release_band``. With dry friction a closed valve keeps the chamber
   masses and the piston stays where it stopped; integral action or a disturbance
@@ -175,6 +180,9 @@ class Compensated:
         valve closed (0: never); default half a quantum (see :func:`design`).
     release_band : m, |r - x_measured| above which it is controlled again.
     lock_speed : m/s, |v| below which the piston counts as stopped.
+    hold : :class:`~.hold.HoldPositioner` or None. When given, it replaces the lock
+        above: locked on the target's quantum, a stuck piston pulsed in (see
+        :mod:`workbench.controllers.hold`).
     """
 
     inner: Any
@@ -182,6 +190,7 @@ class Compensated:
     lock_band: float = 0.0
     release_band: float = 0.0
     lock_speed: float = 0.0
+    hold: Any = None
 
     def __post_init__(self) -> None:
         for name in ("lock_band", "release_band", "lock_speed"):
@@ -190,6 +199,9 @@ class Compensated:
                 raise InputError(f"{name} must be >= 0, got {v!r}")
         if self.release_band < self.lock_band:
             raise InputError("release_band must not be below lock_band")
+        if self.hold is not None and self.deadband is None:
+            raise InputError("the hold's pulses need the valve's centre and span: give a "
+                             "DeadbandInverse (DeadbandInverse.from_plant)")
 
     @property
     def sample_time(self) -> float:
@@ -200,14 +212,24 @@ class Compensated:
         return getattr(self.inner, "kind", type(self.inner).__name__)
 
     def reset(self):
-        return (self.inner.reset(), False, None)
+        return (self.inner.reset(), False, None,
+                None if self.hold is None else self.hold.reset(), None)
 
     def update(self, state, r: float, y: dict):
-        inner_state, locked, r_prev = state
+        inner_state, locked, r_prev, hold_state, entry = state
+        before = inner_state
         inner_state, u = self.inner.update(inner_state, r, y)   # keeps time and estimates
         if self.deadband is not None:
             u = self.deadband(u)
-        if self.lock_band > 0:
+        if self.hold is not None:
+            hold_state, opening = self.hold.step(hold_state, r, y)
+            if opening is None:
+                entry = None
+            else:
+                u = self._opening(opening)
+                entry = before if entry is None else entry
+                inner_state = held(self.inner, inner_state, entry, opening)
+        elif self.lock_band > 0:
             e = abs(r - float(y.get("x_measured", y["x"])))
             still = r_prev is not None and abs(r - r_prev) <= 1e-12
             if locked:
@@ -216,7 +238,35 @@ class Compensated:
                 locked = still and e <= self.lock_band and abs(float(y["v"])) <= self.lock_speed
             if locked:
                 u = self.deadband.null if self.deadband is not None else _centre(self.inner)
-        return (inner_state, locked, r), float(u)
+        return (inner_state, locked, r, hold_state, entry), float(u)
+
+    def _opening(self, s: float) -> float:
+        """Command (V) for the valve opening ``s`` (fraction of the span, deadband
+        inverted; 0: the null)."""
+        return self.deadband(self.deadband.center + s * self.deadband.span)
+
+
+def held(law, new, entry, opening: float):
+    """The position law's state while the hold commands the valve (no windup).
+
+    The law ran this sample on a command it did not send: its integral or force
+    estimate would wind up against the stuck piston, and a wound-up estimate makes
+    the next move after the hold a jump. ``law.held(new, entry, opening)`` if the law
+    defines it (``entry``: the law's state when the hold took over); else a dataclass
+    state with ``d`` (force estimate, N) and ``u_prev`` (the command last applied, as
+    an opening: the NMPC's planning model has neither deadband nor offset) gets
+    ``d = 0`` and ``u_prev = opening``: the hold keeps the net force on the stuck
+    piston near zero, so the friction force that holds it is near zero too, and that
+    is what the estimate of the unmodelled force says when the law takes over again.
+    Otherwise unchanged.
+    """
+    own = getattr(law, "held", None)
+    if own is not None:
+        return own(new, entry, opening)
+    import dataclasses
+    if dataclasses.is_dataclass(new) and hasattr(new, "d") and hasattr(new, "u_prev"):
+        return dataclasses.replace(new, d=0.0, u_prev=float(opening))
+    return new
 
 
 def _centre(inner) -> float:

@@ -8,12 +8,13 @@ needs only ``x``, ``p_a``, ``p_b`` in its measurements (it never reads ``v``):
 * :class:`~.observer.Observed` with a :func:`~.observer.kalman_observer`: velocity and
   unmodelled force from the position and the pressures;
 * :class:`~.compensation.Compensated`: the valve's deadband and null offset inverted
-  (when the plant file has them) and, when it has dry friction, the hold lock
-  (valve closed once the piston stopped within half a quantum). Only friction holds
-  a piston whose valve is closed: without it the closed chambers are two gas
-  springs, and a piston locked before its forces balance swings out of the release
+  (when the plant file has them) and, when it has dry friction, the precision hold
+  (:func:`~.hold.hold_for_plant`: net force held at zero, locked on the target's
+  quantum, a stuck piston pulsed in; :mod:`workbench.controllers.hold`). Only
+  friction holds a piston whose valve is closed: without it the closed chambers are
+  two gas springs, and a piston locked before its forces balance swings out of the
   band and back (a deadband-only rig, NMPC, 1 s hold: 0.44 mm peak-to-peak and 57
-  command changes with the lock, 0.0000 mm and 1 without);
+  command changes with the older lock, 0.0000 mm and 1 without);
 * the position law: ``"pid"`` (PID on the estimated state, derivative on the
   estimated velocity, zero placed on the reduced model), ``"fl"`` (feedback
   linearisation on the observer's force estimate, the plant file's dry friction
@@ -47,6 +48,7 @@ import numpy as np
 
 from ..errors import InputError
 from .compensation import Compensated, DeadbandInverse, FrictionModel
+from .hold import hold_for_plant
 from .observer import Observed, kalman_observer
 
 __all__ = ["design", "axis_limits", "AxisLimits", "KINDS", "VelocityPID"]
@@ -132,6 +134,11 @@ class VelocityPID:
     def reset(self):
         return (0.0, None, 0.0)
 
+    def held(self, new, entry, opening: float):
+        """State while a hold commands the valve: the integral frozen at ``entry``'s
+        (:func:`~.compensation.held`)."""
+        return (new[0] if entry is None else entry[0], new[1], new[2])
+
     def update(self, state, r: float, y: dict):
         integ, r_prev, t = state
         T = self.sample_time
@@ -206,8 +213,10 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
     if lock is None:
         lock = "dry_friction" in has              # only friction holds a locked piston
     band = min(0.5 * q, 0.5 * ss_limit) if lock else 0.0
+    hold = (hold_for_plant(plant, T, 2.0 * band, pressure_noise, lock_speed=LOCK_SPEED)
+            if lock else None)
     comp = Compensated(law, deadband=dead, lock_band=band, release_band=4.0 * band,
-                       lock_speed=LOCK_SPEED if lock else 0.0)
+                       lock_speed=LOCK_SPEED if lock else 0.0, hold=hold)
     return Observed(comp, obs, plant, preview=preview)
 
 

@@ -132,9 +132,7 @@ class DesignEvaluation:
               ("observer", c.observer.summary()),
               ("deadband inverse", f"deadband {comp.deadband.deadband:g} of the span, null "
                                    f"offset {comp.deadband.offset:g} V"),
-              ("hold lock", f"valve closed within {comp.lock_band * 1e3:.3f} mm at under "
-                            f"{comp.lock_speed * 1e3:g} mm/s, released beyond "
-                            f"{comp.release_band * 1e3:.3f} mm" if comp.lock_band else "off"),
+              ("hold", _hold_text(comp)),
               ("friction feedforward", _friction_text(comp.inner)),
               ("trajectory limits", f"{self.limits.speed:.3g} m/s, {self.limits.acceleration:.3g} "
                                     f"m/s^2, {self.limits.jerk:.4g} m/s^3"),
@@ -160,6 +158,17 @@ class DesignEvaluation:
                                  "with continuing command activity"),
             ]),
         ]
+
+
+def _hold_text(comp) -> str:
+    """The compensation's hold in words: the precision hold, the plain lock, or off."""
+    hold = getattr(comp, "hold", None)
+    if hold is not None:
+        return hold.summary()
+    if comp.lock_band:
+        return (f"valve closed within {comp.lock_band * 1e3:.3f} mm at under "
+                f"{comp.lock_speed * 1e3:g} mm/s, released beyond {comp.release_band * 1e3:.3f} mm")
+    return "off"
 
 
 def _friction_text(law) -> str:

@@ -1,0 +1,186 @@
+"""The precision hold's logic (workbench.controllers.hold), sample by sample, no simulation.
+
+A scripted piston (measured position and pressures given sample by sample) drives the
+state machine; the expected commands are written out from the module docstring.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import pytest
+
+from workbench import Plant
+from workbench.controllers.compensation import Compensated, DeadbandInverse, held
+from workbench.controllers.hold import SOUND_SPEED, HoldPositioner, hold_for_plant
+from workbench.errors import InputError
+
+RIG = Path(__file__).resolve().parents[1] / "designs" / "plants" / "rigs" / "precision_rig25.toml"
+Q = 0.5 / 4096
+A = math.pi / 4 * 0.025 ** 2
+P0 = 4.0e5          # both chambers: no net force
+
+
+def _hold(**kw):
+    kw = {"quantum": Q, "sample_time": 0.002, "width": 2, "amplitude": 0.2, "dwell": 0.02,
+          "range": 2e-3, "lock_speed": 0.02, "force_rate": 3e4, "force_band": 1.5,
+          "area_a": A, "area_b": A, **kw}
+    return HoldPositioner(**kw)
+
+
+def _y(x, v=0.0, p_a=P0, p_b=P0):
+    return {"x": x, "x_measured": x, "v": v, "p_a": p_a, "p_b": p_b}
+
+
+def _run(h, s, r, ys):
+    out = []
+    for y in ys:
+        s, u = h.step(s, r, y)
+        out.append(u)
+    return s, out
+
+
+def test_a_moving_reference_leaves_the_law_in_charge():
+    h = _hold()
+    s = h.reset()
+    for k in range(20):
+        s, u = h.step(s, 0.1 + 1e-4 * k, _y(0.1))
+        assert u is None and s["mode"] == "track"
+
+
+def test_a_slow_piston_in_the_targets_bin_is_held_a_fast_one_is_not():
+    h = _hold()
+    r = 0.25 + 0.3 * Q                              # in the bin of the level 0.25
+    s, out = _run(h, h.reset(), r, [_y(0.25, v=0.05)] * 2)
+    assert out == [None, None]                      # 50 mm/s > lock_speed
+    s, u = h.step(s, r, _y(0.25, v=0.01))
+    assert u == 0.0 and s["mode"] == "settle"       # valve closed (no force to hold off)
+    s, out = _run(h, s, r, [_y(0.25)] * h.dwell_samples)
+    assert out == [0.0] * h.dwell_samples and s["mode"] == "locked"
+
+
+def test_a_stuck_piston_off_the_bin_gets_one_pulse_then_the_valve_closed():
+    h = _hold()
+    r = 0.25 + 2 * Q                                # two quanta above the measured level
+    n = h.dwell_samples                             # 10 samples of 2 ms
+    s, out = _run(h, h.reset(), r, [_y(0.25)] * (n + 2 * h.width + 2))
+    assert out[:n] == [None] * n                    # the law, until the dwell has passed
+    # then one pulse: +a for `width` samples towards r, -a for as many, then closed
+    assert out[n:] == [0.2, 0.2, -0.2, -0.2, 0.0, 0.0]
+    assert s["mode"] == "settle" and s["pulses"] == 1
+
+
+def test_pulse_strength_grows_without_a_move_and_bisects_after_an_overshoot():
+    h = _hold()
+    r = 0.25 + 2 * Q
+    s, _ = _run(h, h.reset(), r, [_y(0.25)] * 20)             # first pulse, no move
+    s, out = _run(h, s, r, [_y(0.25)] * 15)                   # settled; second pulse
+    assert s["lo+"] == pytest.approx(0.2) and max(out) == pytest.approx(0.2 * 1.5)
+    # the second one carries the piston past the target's bin (3 quanta up)
+    s, out = _run(h, s, r, [_y(0.25 + 3 * Q)] * 15)
+    assert s["hi+"] == pytest.approx(0.3)
+    # now the next pulse goes down, from that direction's (empty) bracket
+    assert min(out) == pytest.approx(-0.3)                    # unchanged strength
+    # a bracket in one direction: the geometric mean of lo and hi
+    s2 = {**s, "lo+": 0.2, "hi+": 0.3}
+    assert h._next(s2, +1.0) == pytest.approx(math.sqrt(0.2 * 0.3))
+
+
+def test_beyond_full_opening_a_pulse_gets_longer():
+    h = _hold(width=3)
+    assert h.pulse_shape(0.5) == (3, 0.5)
+    w, a = h.pulse_shape(1.2)                        # 3.6 opening-samples: 4 samples
+    assert w == 4 and a == pytest.approx(0.9)
+
+
+def test_the_force_is_unloaded_before_a_pulse():
+    h = _hold()
+    r = 0.25 + 2 * Q
+    dp = 20.0 / A                                   # 20 N pushing +x
+    n = h.dwell_samples
+    s, out = _run(h, h.reset(), r, [_y(0.25, p_a=P0 + dp)] * (n + 3))
+    # no pulse on a loaded piston: the force loop opens against the force,
+    # -F / (UNLOAD_SAMPLES rate T)
+    assert s["mode"] == "ready" and s["pulses"] == 0
+    assert out[-1] == pytest.approx(-20.0 / (10 * 3e4 * 0.002), rel=1e-3)
+    # the force drops to 0.2 N: the loop acts on the force filtered over the dwell, so
+    # it goes on opening against it (never less than 1 % of the span) until that is
+    # within half the band, then stops; once the force is steady the pulse follows
+    s, out = _run(h, s, r, [_y(0.25, p_a=P0 + 0.2 / A)] * 60)
+    k = out.index(0.2)
+    nz = [u for u in out[:k] if u != 0.0]
+    assert nz and all(-1.0 <= u <= -0.01 for u in nz)
+    j = max(i for i in range(k) if out[i] != 0.0)
+    assert set(out[j + 1:k]) == {0.0} and out[k:k + 4] == [0.2, 0.2, -0.2, -0.2]
+
+
+def test_far_off_the_law_takes_over_again():
+    h = _hold()
+    r = 0.25 + 3e-3                                 # beyond range (2 mm)
+    s, out = _run(h, h.reset(), r, [_y(0.25)] * 30)
+    assert all(u is None for u in out)
+
+
+def test_hold_for_plant_from_the_rig_file():
+    plant = Plant.from_toml(RIG)
+    h = hold_for_plant(plant, 0.002, Q, pressure_noise=300.0)
+    # width: twice the 1 m lines' acoustic delay, in 2 ms samples, rounded up
+    assert h.width == math.ceil(2 * 1.0 / SOUND_SPEED / 0.002) == 3
+    # force band: 4 sigma of the pressure noise's force (300 Pa on both areas) or
+    # a tenth of the Coulomb friction (15 N), the larger
+    assert h.force_band == pytest.approx(max(4 * 300 * math.hypot(A, A), 1.5))
+    assert h.area_a == pytest.approx(A) and 0 < h.amplitude <= 1
+
+
+@pytest.mark.parametrize("kw", [{"width": 0}, {"amplitude": 0.0}, {"amplitude": 1.5},
+                                {"dwell": -1.0}, {"grow": 0.9}, {"shrink": 1.0},
+                                {"quantum": float("nan")}])
+def test_bad_settings_are_refused(kw):
+    with pytest.raises(InputError):
+        _hold(**kw)
+
+
+def test_compensated_hold_needs_the_valve_map_and_holds_the_laws_estimate():
+    with pytest.raises(InputError, match="DeadbandInverse"):
+        Compensated(inner=object(), hold=_hold())
+
+    @dataclasses.dataclass(frozen=True)
+    class S:
+        d: float
+        u_prev: float
+
+    # a law state with a force estimate: zero while the hold keeps the net force near
+    # zero, and told which opening was applied
+    assert held(object(), S(d=9.0, u_prev=0.4), S(d=2.0, u_prev=0.1), 0.3) == S(0.0, 0.3)
+
+    class Law:
+        def held(self, new, entry, opening):
+            return ("own", entry)
+
+    assert held(Law(), 1, 2, 0.0) == ("own", 2)
+    # through Compensated: commands are the valve map of the opening (null at 0)
+    dead = DeadbandInverse(center=5.0, span=5.0, deadband=0.02)
+
+    class Still:
+        sample_time = 0.002
+
+        def reset(self):
+            return S(0.0, 0.0)
+
+        def update(self, state, r, y):
+            return S(state.d + 1.0, 0.3), 7.0
+
+    c = Compensated(Still(), deadband=dead, hold=_hold())
+    st = c.reset()
+    r = 0.25 + 2 * Q
+    us = []
+    for _ in range(40):
+        st, u = c.update(st, r, _y(0.25))
+        us.append(u)
+    assert us[0] == pytest.approx(dead(7.0))                    # the law's, through the map
+    assert dead(5.0 + 0.2 * 5.0) in us and dead.null in us     # the pulse, then closed
+    # the law's estimate held at zero (it would be 40 after 40 updates) and told the
+    # opening it applied
+    assert st[0].d == 0.0 and us[-1] == pytest.approx(dead(5.0 + 5.0 * st[0].u_prev))
