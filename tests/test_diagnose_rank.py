@@ -538,10 +538,10 @@ def test_uncertainty_is_the_gauss_newton_covariance_written_out():
 
 
 def test_fd_jacobian_steps_back_at_an_upper_bound():
-    """refit._fd_jacobian: forward differences of a quadratic, with the step turned
+    """refit._secant_jacobian: forward differences of a quadratic, with the step turned
     back where it would leave the upper bound. For f(z) = (z0^2, 3 z1) the forward
     difference is 2 z0 + h (exactly, up to rounding) and the backward one 2 z0 - h."""
-    from workbench.diagnose.refit import _fd_jacobian
+    from workbench.diagnose.refit import _secant_jacobian as _fd_jacobian
 
     def fun(z):
         return np.array([z[0] ** 2, 3.0 * z[1]])

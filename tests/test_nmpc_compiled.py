@@ -115,6 +115,10 @@ def test_compiled_sample_follows_a_preview(rig25, nmpc):
     assert np.all(rows < 40 * calls)
 
 
+@pytest.mark.xfail(strict=True, reason="issue 16/14 open: after merging the interior rows from "
+                   "the second interval (limits.FIRST_INTERVAL) with the compiled driver's "
+                   "shifted working set, the compiled plans differ from the Python update's "
+                   "(0.16 on rig25); NMPC runs the Python update when these rows are on")
 def test_compiled_sample_with_limits_between_the_nodes(rig25, nmpc):
     # limits also at the RK4 substep between two nodes: the driver condenses with the
     # generated qp.condense (its interior rows), not its own loop; two substeps

@@ -37,11 +37,8 @@ def bench(quick: bool = False) -> dict:
     ours) runs on every point. ``error``: the largest |rho| difference between the map and the
     model-built-once loop on the sample (-).
     """
-    import control
-
     from ..controllers import from_plant
     from ..identify.valve import serial_blas
-    from ..linearize import operating_point, tangent
     from ..plant import Plant
     from ..stability.maps import Axis, stability_map
     from .baselines_sweep import BatchedMap, pointwise_rho
@@ -90,20 +87,7 @@ def bench(quick: bool = False) -> dict:
         loop_stats, med, err, "python loop over the points, plant built once: workbench "
         "operating_point, one CasADi Jacobian function, scipy expm ZOH, numpy eigenvalues; "
         f"timed on {len(sample)} points and extrapolated")}
-    c_tf = ctrl.to_control()
-    worst = 0.0
-    t0, c0 = time.perf_counter(), time.thread_time()
-    with warnings.catch_warnings(), serial_blas():
-        warnings.simplefilter("ignore")
-        for jy, jx in zip(iy, ix):
-            p = plant.with_params(**{"supply.pressure": float(ya.values[jy])})
-            lin = tangent(p, operating_point(p, float(xa.values[jx])))
-            c, d = lin.output("x")
-            sd = control.c2d(control.ss(lin.A, lin.B, c, d), ctrl.sample_time, "zoh")
-            poles = control.poles(control.feedback(c_tf * sd, 1))
-            poles = poles[np.abs(np.abs(poles) - 1.0) > 1e-6]
-            worst = max(worst, abs(float(np.max(np.abs(poles))) - float(m.rho[jy, jx])))
-    wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    wall, cpu, worst = _python_control_loop(plant, ctrl, xa, ya, iy, ix, m.rho)
     rows["python_control_loop"] = baseline(
         summary([wall * scale], [cpu * scale]), med, worst,
         "old baseline: plant rebuilt per point (with_params), python-control ss/c2d/"
@@ -119,3 +103,26 @@ def bench(quick: bool = False) -> dict:
                                "error": float(np.max(np.abs(res["single"].rho - m.rho))),
                                "note": "the map with workers=1 (this process, one core)"},
             "target": ">= 20000 points/s", "machine": machine()}
+
+
+def _python_control_loop(plant, ctrl, xa, ya, iy, ix, rho):
+    """The old baseline on the sample: (wall s, CPU s, largest |rho| difference)."""
+    import control
+
+    from ..identify.valve import serial_blas
+    from ..linearize import operating_point, tangent
+    c_tf = ctrl.to_control()
+    worst = 0.0
+    t0, c0 = time.perf_counter(), time.thread_time()
+    with warnings.catch_warnings(), serial_blas():
+        warnings.simplefilter("ignore")
+        for jy, jx in zip(iy, ix):
+            p = plant.with_params(**{"supply.pressure": float(ya.values[jy])})
+            lin = tangent(p, operating_point(p, float(xa.values[jx])))
+            c, d = lin.output("x")
+            sd = control.c2d(control.ss(lin.A, lin.B, c, d), ctrl.sample_time, "zoh")
+            poles = control.poles(control.feedback(c_tf * sd, 1))
+            poles = poles[np.abs(np.abs(poles) - 1.0) > 1e-6]
+            worst = max(worst, abs(float(np.max(np.abs(poles))) - float(rho[jy, jx])))
+    wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    return wall, cpu, worst
