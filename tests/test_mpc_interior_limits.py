@@ -153,10 +153,6 @@ def test_interior_rows_change_the_closed_loop(rig25, short):
     assert _same_loop(rig25, short, short.with_settings(interior_limits=False), 100) > 1e-3
 
 
-@pytest.mark.xfail(strict=True, reason="issue 16/14 open: after merging the interior rows from "
-                   "the second interval (limits.FIRST_INTERVAL) with the compiled driver's "
-                   "shifted working set, the compiled plans differ from the Python update's "
-                   "(0.16 on rig25); NMPC runs the Python update when these rows are on")
 def test_compiled_sample_with_interior_limits_gives_the_same_plans(rig25, short):
     """CompiledNMPC (one C call per sample, DAQP linked) against the Python update on
     a closed loop with the interior rows: same CasADi graph, same QP library, so the

@@ -115,10 +115,6 @@ def test_compiled_sample_follows_a_preview(rig25, nmpc):
     assert np.all(rows < 40 * calls)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 16/14 open: after merging the interior rows from "
-                   "the second interval (limits.FIRST_INTERVAL) with the compiled driver's "
-                   "shifted working set, the compiled plans differ from the Python update's "
-                   "(0.16 on rig25); NMPC runs the Python update when these rows are on")
 def test_compiled_sample_with_limits_between_the_nodes(rig25, nmpc):
     # limits also at the RK4 substep between two nodes: the driver condenses with the
     # generated qp.condense (its interior rows), not its own loop; two substeps
@@ -234,3 +230,33 @@ def test_inlined_fmax_fmin_match_libm():
     # and the replacement is made where CasADi's runtime calls them
     out = _inline_minmax("x\n  return fmax(x, y);\n  return fmin(x, y);\n")
     assert "WB_FMAX(x, y)" in out and "WB_FMIN(x, y)" in out and "return fmax" not in out
+
+
+
+def test_any_warm_start_gives_the_same_plan(rig25, nmpc, fast):
+    # the working set is only DAQP's starting guess: the QP solved is the full one
+    # (rows left out are checked and added), so a working set of another QP gives the
+    # plan of no working set: rows marked active on their infinite side (a lower row
+    # as upper; what a working set shifted by the wrong rows once gave: DAQP then
+    # returned a NaN step as optimal, the sample failed and restarted cold), and
+    # random marks
+    pb = fast.pb
+    x = rig25.initial_state(0.30)
+    y = {n: float(x[rig25.state_index(n)]) for n in NAMES}
+    y["v"] = 0.4                                       # a limit active over the plan
+    ref, _ = fast.update(fast.memory(None), 0.47, y)
+    plan = (ref.X.copy(), ref.U[None, :].copy(), ref.u_prev, 0.47, ref.z.copy(), ref.d, ref.t)
+    base, _ = fast.update(fast.memory(plan + (None,)), 0.47, y)
+    assert base.qp_counts()[1] > 0                      # rows were active
+    nz, n = pb.N + pb.ns, pb.N
+    wrong = []
+    for row in range(2 * n * len(pb.soft)):             # blocks: lower, upper, ...
+        ws = base.working_set.copy()
+        ws[nz + row] = 1.0 if (row // n) % 2 == 0 else -1.0    # marked at its infinite side
+        wrong.append(ws)
+    rng = np.random.default_rng(0)
+    for ws in wrong + [rng.choice([-1.0, 0.0, 1.0], size=wrong[0].size) for _ in range(4)]:
+        got, _ = fast.update(fast.memory(plan + (ws,)), 0.47, y)
+        assert fast.info(got).success and not fast.info(got).restarted
+        assert np.max(np.abs(got.U - base.U)) <= 1e-8
+        assert np.max(np.abs(got.X - base.X)) <= 1e-8

@@ -48,7 +48,7 @@ from ...integrate.jit import (CompileError, cache_dir, have_compiler, shared_lib
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
 from .fast_c import CONFIG, DRIVER
-from .qp import apply_step, condense, intervals
+from .qp import DAQP_PRIMAL_TOL, apply_step, condense, intervals
 from .results import StepInfo
 
 __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
@@ -107,7 +107,8 @@ def _source(pb) -> str:
     cfg = "\n".join(f"#define C_{k} {i}" for i, k in enumerate(CONFIG))
     return generated + DRIVER % {
         "N": pb.N, "NP": pb.P.size, "CFG": cfg, "NCFG": len(CONFIG), "NZ": nz, "NC": nc,
-        "NRN": 2 * pb.N * len(pb.soft), "MINT": pb.m_int, "QP_TOL": QP_TOL,
+        "NRN": 2 * pb.N * len(pb.soft), "MINT": pb.m_int,
+        "KI0": pb.first_interior, "PRIMAL_TOL": DAQP_PRIMAL_TOL, "QP_TOL": QP_TOL,
         "QP_ROUNDS": QP_ROUNDS, "QP_WARM": int(QP_WARM), **_settings_layout(pb),
         "NSOFT": len(pb.soft), "SOFT_I": ", ".join(str(i) for i, _ in pb.soft),
         "SOFT_J": ", ".join(str(j) for _, j in pb.soft), "W_LO": float(pb.w_lo),

@@ -34,10 +34,17 @@ that fails. After ``QP_ROUNDS`` rounds, or when DAQP fails on the reduced QP, th
 QP is solved cold, as CasADi's DAQP plugin does.
 
 A left-out row counts as violated beyond ``QP_TOL`` (scaled units: position / stroke,
-pressure / supply); DAQP's own tolerance on the rows it holds is its ``primal_tol``
-(1e-6 on rows normalised by the factor of H). The two solutions (this one and DAQP's
-on all rows) differ by rounding where their final working sets agree, and by at most
-a violation DAQP accepts where they do not (tests: <= 1e-8 in the plan).
+pressure / supply); DAQP's own tolerance on the rows it holds is its ``primal_tol``,
+:data:`.qp.DAQP_PRIMAL_TOL` (1e-9 on rows normalised by the factor of H; CasADi's
+plugin gets the same). The two solutions (this one and DAQP's on all rows) differ by
+rounding where their final working sets agree, and by at most a violation DAQP
+accepts where they do not (tests: <= 1e-8 in the plan; at DAQP's default 1e-6 they
+were 3e-7 apart with the limits between the nodes).
+
+The rows are ordered as :func:`.qp.condense` stacks them: per soft limit a lower and
+an upper block of N node rows, then per soft limit a lower and an upper block of
+(N - KI0) x MINT interior rows (:func:`.limits.interior_rows`, intervals KI0 .. N - 1,
+:data:`.limits.FIRST_INTERVAL`), which the shift of the working set follows.
 """
 
 from __future__ import annotations
@@ -61,10 +68,14 @@ DRIVER = r"""
 #define NZ %(NZ)d
 #define NC %(NC)d
 #define NRN %(NRN)d      /* node rows: NRN / NN blocks of NN rows, node by node */
-#define MINT %(MINT)d    /* then interior rows: blocks of NN MINT rows, MINT per node */
+#define MINT %(MINT)d    /* then interior rows: MINT points per interval, */
+#define KI0 %(KI0)d      /* ... from interval KI0 on (limits.FIRST_INTERVAL): */
+#define NRI ((NN - KI0) * MINT)                 /* blocks of NRI rows, interval by interval */
+#define NRI_B (NRI > 0 ? (NC - NRN) / NRI : 0)  /* (lower, upper per soft limit) */
 #define NW (NZ + NC)     /* working set: the bounds, then the rows */
 #define NZI (NX * NN * MINT + 1)  /* interior points' states (+1: never empty) */
 #define QP_TOL %(QP_TOL)r
+#define PRIMAL_TOL %(PRIMAL_TOL)r  /* DAQP's primal_tol (qp.DAQP_PRIMAL_TOL) */
 #define QP_ROUNDS %(QP_ROUNDS)d
 #define QP_WARM %(QP_WARM)d
 %(CFG)s
@@ -180,10 +191,20 @@ static void ws_shift(double *ws) {
     double *r = ws + NZ + b * NN;
     for (k = 0; k < NN - 1; ++k) r[k] = r[k + 1];
   }
-  if (MINT > 0) for (b = 0; b < (NC - NRN) / (NN * (MINT > 0 ? MINT : 1)); ++b) {
-    double *r = ws + NZ + NRN + b * NN * MINT;
-    for (k = 0; k < NN - 1; ++k) for (j = 0; j < MINT; ++j) r[k * MINT + j] = r[(k + 1) * MINT + j];
+  for (b = 0; b < NRI_B; ++b) {       /* interior rows: intervals KI0 .. NN - 1 */
+    double *r = ws + NZ + NRN + b * NRI;
+    for (k = 0; k + 1 < NN - KI0; ++k)
+      for (j = 0; j < MINT; ++j) r[k * MINT + j] = r[(k + 1) * MINT + j];
   }
+}
+
+/* DAQP's sense of a constraint marked sg in a working set (+1 upper, -1 lower
+   active): active only at a finite bound (a mark at an infinite one, from a working
+   set of another QP, would pin the step at infinity) */
+static int ws_sense(double sg, double lo, double up) {
+  if (sg > 0.0 && up < INFINITY) return 1;
+  if (sg < 0.0 && lo > -INFINITY) return 3;
+  return 0;
 }
 
 /* DAQP on the bounds and the rows h->sub[0..nsub), the working set h->ws marked active
@@ -192,26 +213,28 @@ static int qp_daqp(wb_fast_t *h, int nsub, int warm) {
   DAQPProblem p; DAQPResult r; int i, j; c_float t;
   for (i = 0; i < NZ; ++i) {
     h->bl[i] = h->lbx[i]; h->bu[i] = h->ubx[i];
-    h->sense[i] = h->lbx[i] == h->ubx[i] ? 5 : !warm || h->ws[i] == 0.0 ? 0 : h->ws[i] > 0.0 ? 1 : 3;
+    h->sense[i] = h->lbx[i] == h->ubx[i] ? 5 : warm ? ws_sense(h->ws[i], h->lbx[i], h->ubx[i]) : 0;
   }
   for (j = 0; j < nsub; ++j) {
     int row = h->sub[j]; double sg = h->ws[NZ + row];
     for (i = 0; i < NZ; ++i) h->Ar[j * NZ + i] = h->A[row + NC * i];
     h->bl[NZ + j] = h->lba[row]; h->bu[NZ + j] = h->uba[row];
-    h->sense[NZ + j] = h->lba[row] == h->uba[row] ? 5 : !warm || sg == 0.0 ? 0 : sg > 0.0 ? 1 : 3;
+    h->sense[NZ + j] = h->lba[row] == h->uba[row] ? 5 : warm ? ws_sense(sg, h->lba[row], h->uba[row]) : 0;
   }
   p.n = NZ; p.m = NZ + nsub; p.ms = NZ; p.H = h->H; p.f = h->g; p.A = h->Ar;
   p.bupper = h->bu; p.blower = h->bl; p.sense = h->sense;
   r.x = h->dw; r.lam = h->lam;
-  /* as CasADi's DAQP plugin calls it, on a zeroed workspace, but with DAQP's own
-     default settings (allocated by the set-up, freed with the workspace: a set-up that
-     fails frees the settings it holds) */
+  /* as CasADi's DAQP plugin calls it, on a zeroed workspace, with DAQP's own
+     default settings but primal_tol (allocated by the set-up, freed with the workspace:
+     a set-up that fails frees the settings it holds) */
   memset(&h->work, 0, sizeof(h->work));
   if (setup_daqp(&p, &h->work, &t) < 0) r.exitflag = -1;
-  else daqp_solve(&r, &h->work);
+  else { h->work.settings->primal_tol = PRIMAL_TOL; daqp_solve(&r, &h->work); }
   free_daqp_workspace(&h->work);
   free_daqp_ldp(&h->work);
   h->qps[0] += 1.0; h->qps[1] += nsub;
+  for (i = 0; i < NZ && r.exitflag == 1; ++i)
+    if (!(fabs(h->dw[i]) < INFINITY)) r.exitflag = -1;   /* NaN or inf: failed */
   if (r.exitflag == 1) {                 /* the working set of this solution */
     for (i = 0; i < NZ; ++i) h->ws[i] = h->lam[i] > 0.0 ? 1.0 : h->lam[i] < 0.0 ? -1.0 : 0.0;
     for (j = 0; j < NC; ++j) h->ws[NZ + j] = 0.0;

@@ -27,11 +27,22 @@ import numpy as np
 from .limits import interior_rows
 
 
-__all__ = ["sqp_step", "intervals", "condense", "prepare", "apply_step", "qp_solver", "INSIDE"]
+__all__ = ["sqp_step", "intervals", "condense", "prepare", "apply_step", "qp_solver", "INSIDE",
+           "DAQP_PRIMAL_TOL"]
 
 #: scaled command: the plan is kept this far inside the command range (1e-8 V on a 10 V
 #: span; see :func:`apply_step`)
 INSIDE = 1e-9
+
+#: DAQP's primal tolerance (its ``primal_tol``: the violation it accepts of a row, the
+#: row normalised by the factor of H), for the CasADi plugin and the compiled sample
+#: (:mod:`.fast_c`) alike. DAQP's default 1e-6 let a solve stop with a row violated by
+#: 3e-7 that another solve of the same QP (from another starting working set) held
+#: active: plans 3e-7 apart where both should give the one optimum (rig25, limits
+#: between the nodes). At 1e-9 the two agree to rounding, and a QP whose rows are all
+#: held to 1e-9 (scaled: position / stroke, pressure / supply) is the exact one for
+#: any plan it is used for.
+DAQP_PRIMAL_TOL = 1e-9
 
 
 def sqp_step(pb, jit: bool | None = None) -> "ca.Function | _LazyStep":
@@ -269,7 +280,9 @@ def qp_solver(name: str, nz: int, nc: int) -> ca.Function:
     """The CasADi conic plugin ``name`` for a dense QP of nz variables and nc rows."""
     hs, As = ca.Sparsity.dense(nz, nz), ca.Sparsity.dense(nc, nz)
     opts: dict[str, Any] = {"error_on_fail": False}
-    if name == "qpoases":
+    if name == "daqp":
+        opts.update(daqp={"primal_tol": DAQP_PRIMAL_TOL})
+    elif name == "qpoases":
         opts.update(printLevel="none", sparse=False)
     elif name == "osqp":
         opts.update(warm_start_primal=True,

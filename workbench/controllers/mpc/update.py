@@ -96,8 +96,8 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
 def compiled_sample(pb):
     """(the compiled sample of the problem's NMPC, None) or (None, why not); built at
     the first call and kept on the problem. Off: the setting ``compiled_sample`` or
-    ``jit`` off, mode ipopt, a QP solver other than DAQP, limits between the nodes,
-    no C compiler, no DAQP library, or too many compiled NMPCs alive."""
+    ``jit`` off, mode ipopt, a QP solver other than DAQP, no C compiler, no DAQP
+    library, or too many compiled NMPCs alive."""
     got = getattr(pb, "_compiled_sample", None)
     if got is not None:
         return got
@@ -111,10 +111,6 @@ def compiled_sample(pb):
         why = f"mode {c.mode} runs in Python"
     elif c.qp_solver != "daqp":
         why = f"the compiled sample links DAQP, not {c.qp_solver}"
-    elif getattr(pb, "m_int", 0):
-        # the driver's shifted working set and the interior rows from the second
-        # interval on disagree (plans 0.16 apart on rig25): the Python update is exact
-        why = "limits between the nodes run in the Python update"
     fast = None
     if why is None:
         from ...integrate.jit import CompileError
