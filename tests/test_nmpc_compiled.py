@@ -202,6 +202,33 @@ def test_nmpc_update_runs_the_compiled_sample(rig25, nmpc):
     pb = on._problem
     assert s2.working_set.shape == (pb.N + pb.ns + pb.n_rows,)
     assert np.all(np.isin(s2.working_set, (-1.0, 0.0, 1.0)))
+    # the buffer behind the last state is updated in place (update.py), so a state
+    # used twice (a branch) must give the same sample both times
+    s3, u3 = on.update(s2, 0.35, y)
+    s3b, u3b = on.update(s2, 0.35, y)                      # s2 is no longer the last
+    assert u3 == u3b and np.array_equal(s3.X, s3b.X) and np.array_equal(s3.U, s3b.U)
+    s4, _ = on.update(s3, 0.40, y)                         # back on the first branch
+    s4b, _ = on.update(s3b, 0.40, y)
+    assert np.array_equal(s4.X, s4b.X) and s4.t == s4b.t == pytest.approx(0.03)
+
+
+@pytest.mark.parametrize("jit", [False, True])
+def test_nmpc_update_names_a_bad_measurement(nmpc, jit):
+    # the Python update (jit off) as the compiled sample: an InputError naming the
+    # input, not CasADi's assertion on a NaN
+    c = nmpc.with_settings(jit=jit)
+    y = {"x": 0.2, "v": 0.0, "p_a": 4e5, "p_b": 4e5}
+    s, _ = c.update(None, 0.25, y)
+    with pytest.raises(InputError, match="p_a"):
+        c.update(s, 0.25, {**y, "p_a": float("nan")})
+    with pytest.raises(InputError, match="x"):
+        c.update(s, 0.25, {**y, "x": float("-inf")})
+    with pytest.raises(InputError, match="reference"):
+        c.update(s, float("nan"), y)
+    with pytest.raises(InputError, match="v"):
+        c.update(s, 0.25, {k: y[k] for k in ("x", "p_a", "p_b")})
+    s2, _ = c.update(s, 0.25, y)                           # the memory is intact
+    assert s2.info.success and s2.t == pytest.approx(0.01)
 
 
 def test_nmpc_says_why_it_runs_in_python(nmpc):

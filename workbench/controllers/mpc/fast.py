@@ -180,12 +180,12 @@ class CompiledMemory:
         self.buf = np.zeros(size)
         self.ptr = self.buf.ctypes.data
         self.N = N
+        n = 4 * (N + 1) + N
+        self._off = {"u_prev": n, "r_prev": n + 1, "z": n + 2, "d": n + 6, "t": n + 7,
+                     "it": n + 9, "qps": n + 9 + 13, "ws": n + 9 + 16}
 
     def _at(self, name: str) -> int:
-        n = 4 * (self.N + 1)
-        return {"u_prev": n + self.N, "r_prev": n + self.N + 1, "z": n + self.N + 2,
-                "d": n + self.N + 6, "t": n + self.N + 7, "it": n + self.N + 9,
-                "qps": n + self.N + 9 + 13, "ws": n + self.N + 9 + 16}[name]
+        return self._off[name]
 
     @property
     def X(self) -> np.ndarray:
@@ -220,12 +220,14 @@ class CompiledMemory:
         q = self.buf[self._at("qps"):self._at("qps") + 3]
         return int(q[0]), int(q[1]), int(q[2])
 
-    def step_info(self, pb) -> StepInfo:
-        """The last update's report, violations in SI units."""
-        i = self._at("it")
+    def step_info(self, pb, solve_time: float | None = None) -> StepInfo:
+        """The last update's report, violations in SI units; its solve time the C
+        sample's, or ``solve_time`` (s) if given."""
+        i = self._off["it"]
         it, ok, restarted = self.buf[i:i + 3]
-        v = self.buf[i + 3:i + 7]
-        return StepInfo(iterations=int(it), success=bool(ok), solve_time=float(self.buf[i + 7]),
+        v = self.buf[i + 3:i + 7].tolist()
+        return StepInfo(iterations=int(it), success=bool(ok),
+                        solve_time=float(self.buf[i + 7]) if solve_time is None else solve_time,
                         restarted=bool(restarted), slack_stroke=max(v[0], 0.0) * pb.L,
                         slack_pressure=max(v[2], v[3]) * pb.p_sup,
                         slack_speed=v[1] * V_SCALE if pb.c.max_speed is not None else 0.0)

@@ -65,10 +65,7 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     fast = compiled_sample(pb)[0]
     if fast is not None:
         return _advance_compiled(pb, fast, y, r, state, t0)
-    try:
-        zm = np.array([y[k] for k in NMPC_STATES], dtype=float) / pb.sx
-    except KeyError as exc:
-        raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
+    zm = _measured(y, r) / pb.sx
     t = 0.0 if state is None else state.t + pb.T
     R, VR = node_reference(pb, r, None if state is None else state.r_prev, t)
     R, VR = admissible(pb, R, VR)
@@ -91,6 +88,32 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     w0 = float(U[0])
     info = _step_info(pb, it, ok, viol, restarted, time.perf_counter() - t0)
     return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info, t=t)
+
+
+def _measured(y: dict, r: float) -> np.ndarray:
+    """(4,) measured x, v, p_a, p_b (SI) from ``y``; InputError naming a missing,
+    non-numeric or non-finite one (or the reference ``r``), as the compiled sample's
+    (:meth:`.fast.CompiledNMPC.update`)."""
+    try:
+        z = np.array([y[k] for k in NMPC_STATES], dtype=float)
+    except KeyError as exc:
+        raise InputError(f"the NMPC needs the measured {exc} (it measures x, v, p_a, p_b)") from None
+    except (TypeError, ValueError):
+        bad = [k for k in NMPC_STATES if not _is_number(y[k])]
+        raise InputError(f"the NMPC's measured {', '.join(bad)} must be numbers") from None
+    if not (np.all(np.isfinite(z)) and np.isfinite(r)):
+        bad = [k for k, v in (*zip(NMPC_STATES, z), ("reference", r)) if not np.isfinite(v)]
+        raise InputError(f"the NMPC got a measurement or reference that is not a finite "
+                         f"number: {', '.join(bad)}")
+    return z
+
+
+def _is_number(v) -> bool:
+    try:
+        float(v)
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 def compiled_sample(pb):
@@ -127,18 +150,30 @@ def compiled_sample(pb):
 
 def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
                       t0: float) -> NMPCState:
-    """:func:`advance` as one compiled C call: the memory copied into a fresh buffer
-    (the state passed in is not changed), the new state read out of it (its X, U
-    numpy arrays: a casadi.DM each would cost 30 us a sample)."""
-    mem = fast.memory(None if state is None else
-                      (state.X, state.U, state.u_prev, state.r_prev, state.z, state.d,
-                       state.t, state.working_set))
+    """:func:`advance` as one compiled C call, the state passed in not changed.
+
+    The compiled sample works on a :class:`.fast.CompiledMemory` buffer. The buffer
+    behind the state this problem returned last is kept (``pb._compiled_last``) and
+    updated in place when that state comes back (a closed loop); any other state is
+    copied into a fresh buffer. The new state's X, U, z and working set are copies
+    (numpy: a casadi.DM each would cost 30 us a sample).
+    """
+    last = getattr(pb, "_compiled_last", None)
+    if state is not None and last is not None and last[0] is state:
+        mem = last[1]
+    else:
+        mem = fast.memory(None if state is None else
+                          (state.X, state.U, state.u_prev, state.r_prev, state.z, state.d,
+                           state.t, state.working_set))
+    pb._compiled_last = None                           # mem changes: no state matches it
     mem, _ = fast.update(mem, r, y)
-    info = mem.step_info(pb)
-    info = StepInfo(**{**vars(info), "solve_time": time.perf_counter() - t0})
-    return NMPCState(X=mem.X.copy(), U=mem.U[None, :].copy(), u_prev=mem.u_prev, r_prev=r,
-                     z=mem.z.copy(), d=mem.d, lam=None, info=info, t=mem.t,
-                     working_set=mem.working_set.copy())
+    b, o = mem.buf, mem._off
+    new = NMPCState(X=mem.X.copy(), U=mem.U[None, :].copy(), u_prev=float(b[o["u_prev"]]),
+                    r_prev=r, z=b[o["z"]:o["z"] + 4].copy(), d=float(b[o["d"]]), lam=None,
+                    info=mem.step_info(pb, time.perf_counter() - t0), t=float(b[o["t"]]),
+                    working_set=b[o["ws"]:].copy())
+    pb._compiled_last = (new, mem)
+    return new
 
 
 def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: float,
