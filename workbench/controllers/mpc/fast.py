@@ -9,8 +9,8 @@ a cold start and then to the shifted previous plan on failure. Of the Gauss-Newt
 step (:func:`.qp.sqp_step`: prep, QP, post) the linearisation (:func:`.qp.intervals`)
 and post (:func:`.qp.apply_step`) are generated as C by CasADi; a hand-written C
 driver (:mod:`.fast_c`) does the rest of the sample: the condensing (what
-:func:`.qp.condense` computes, by the block recursion; with limits between the nodes
-the generated :func:`.qp.condense` itself), and the QP, by DAQP's own C library (the
+:func:`.qp.condense` computes, by the block recursion, with the rows of the limits
+between the nodes), and the QP, by DAQP's own C library (the
 static ``libdaqpstat.a`` shipped with CasADi, linked in) on the rows that may be
 active: the previous sample's working set, and the rows its solution violates (the
 same optimum as on all rows; see :mod:`.fast_c`).
@@ -48,7 +48,7 @@ from ...integrate.jit import (CompileError, cache_dir, have_compiler, shared_lib
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
 from .fast_c import CONFIG, DRIVER
-from .qp import DAQP_PRIMAL_TOL, apply_step, condense, intervals
+from .qp import DAQP_PRIMAL_TOL, apply_step, intervals
 from .results import StepInfo
 
 __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
@@ -92,11 +92,11 @@ def _daqp_paths() -> tuple[str, str] | None:
 
 
 def _source(pb) -> str:
-    """The generated interval linearisation and post (and the condensing, with limits
-    between the nodes) followed by the driver (which condenses and calls DAQP)."""
+    """The generated interval linearisation and post followed by the driver (which
+    condenses and calls DAQP)."""
     nz, nc = pb.N + pb.ns, pb.n_rows
-    funs = [intervals(pb), apply_step(pb)] + ([condense(pb)] if pb.m_int else [])
-    _check_layout(pb, *funs[:2])
+    funs = [intervals(pb), apply_step(pb)]
+    _check_layout(pb, *funs)
     with tempfile.TemporaryDirectory(prefix="wb_fast_") as tmp:
         gen = ca.CodeGenerator("wb_fast.c", {"with_header": False})
         for f in funs:

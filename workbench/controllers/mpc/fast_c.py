@@ -11,8 +11,10 @@ G_{k+1} = [A_k G_k, B_k] (nx^2 k per node, ~N^2 nx^2 / 2 in all), the Hessian
 S0' Wx S0 + S1' Wv S1 + wdu D'D and the gradient over the lower-triangular S (node
 k + 1 depends on moves 0..k only: ~N^3 / 3), the rows from the same S. The generated
 MX loop computed the same in ~15 us at N = 20, this in ~3.5 us (the same numbers up
-to rounding; tests compare the closed loops). With limits between the nodes (rows
-:func:`.limits.interior_rows` adds) the generated :func:`.qp.condense` is called.
+to rounding; tests compare the closed loops). The rows of the limits between the
+nodes (:func:`.limits.interior_rows`) come from the same G_k: the state at a point
+inside interval k moves by Ai (G_k dw) + Bi dw_k (the generated MX condensing took
+60 us of a 115 us sample with them at N = 20, two substeps, loaded machine).
 
 The QP is then solved exactly, but not on all its rows at once:
 
@@ -143,9 +145,6 @@ void wb_fast_free(wb_fast_t *h) {
   if (!h) return;
   if (h->mem[0] >= 0) { wb_nmpc_lin_release(h->mem[0]); wb_nmpc_lin_decref(); }
   if (h->mem[1] >= 0) { wb_nmpc_post_release(h->mem[1]); wb_nmpc_post_decref(); }
-#if MINT > 0
-  if (h->mem[2] >= 0) { wb_nmpc_condense_release(h->mem[2]); wb_nmpc_condense_decref(); }
-#endif
   free(h->arg); free(h->res); free(h->iw); free(h->w); free(h);
 }
 
@@ -157,9 +156,6 @@ wb_fast_t *wb_fast_new(const double *cfg) {
   h->mem[0] = h->mem[1] = h->mem[2] = -1;
   wb_nmpc_lin_work(&sz[0][0], &sz[0][1], &sz[0][2], &sz[0][3]);
   wb_nmpc_post_work(&sz[1][0], &sz[1][1], &sz[1][2], &sz[1][3]);
-#if MINT > 0
-  wb_nmpc_condense_work(&sz[2][0], &sz[2][1], &sz[2][2], &sz[2][3]);
-#endif
   for (k = 0; k < 3; ++k) {
     na = WB_MAX(na, sz[k][0]); nr = WB_MAX(nr, sz[k][1]);
     ni = WB_MAX(ni, sz[k][2]); nw = WB_MAX(nw, sz[k][3]);
@@ -170,10 +166,6 @@ wb_fast_t *wb_fast_new(const double *cfg) {
   h->w = (casadi_real *)malloc(sizeof(casadi_real) * nw);
   wb_nmpc_lin_incref(); h->mem[0] = wb_nmpc_lin_checkout();
   wb_nmpc_post_incref(); h->mem[1] = wb_nmpc_post_checkout();
-#if MINT > 0
-  wb_nmpc_condense_incref(); h->mem[2] = wb_nmpc_condense_checkout();
-  if (h->mem[2] < 0) { wb_fast_free(h); return 0; }
-#endif
   if (!h->arg || !h->res || !h->iw || !h->w || h->mem[0] < 0 || h->mem[1] < 0) {
     wb_fast_free(h); return 0;
   }
@@ -281,7 +273,7 @@ static int qp(wb_fast_t *h) {
   return qp_daqp(h, NC, 0) == 1;
 }
 
-/* ---- the condensed QP (qp.condense without limits between the nodes) */
+/* ---- the condensed QP (qp.condense) */
 #define NG NXN    /* rows of G: the node corrections' sensitivities, node by node */
 /* S_i(k, j): node k + 1's state i by move j (zero for j > k) */
 #define S_(i, k, j) h->G[NX * ((k) + 1) + (i) + NG * (j)]
@@ -360,24 +352,44 @@ static void condense_rows(wb_fast_t *h) {
   for (j = NN; j < NZ; ++j) { h->lbx[j] = 0.0; h->ubx[j] = INFINITY; }
 }
 
-/* the condensed QP of the linearised plan: here, or (limits between the nodes too)
-   the generated qp.condense; 0 on success */
-static int condense(wb_fast_t *h, double up) {
+/* the rows at the points between the nodes (limits.interior_rows): the state at point
+   p of interval k >= KI0 is Zi_c + Ai_c (h_k + G_k dw) + Bi_c dw_k (c = k MINT + p;
+   G_k: node k's sensitivities, moves 0 .. k - 1); per soft limit (i, slack j) a lower
+   row block lo_i - x <= . + s_j, then an upper one . - s_j <= hi_i - x */
+static void condense_interior(wb_fast_t *h) {
 #if MINT > 0
-  int i;
-  const double *a[13];
-  a[0] = h->Aj; a[1] = h->Bj; a[2] = h->cdef; a[3] = h->dz0; a[4] = h->Xs; a[5] = h->Us;
-  a[6] = h->R; a[7] = h->VR; a[8] = &up; a[9] = h->cfg + C_P; a[10] = h->Zi; a[11] = h->Ai;
-  a[12] = h->Bi;
-  for (i = 0; i < 13; ++i) h->arg[i] = a[i];
-  h->res[0] = h->H; h->res[1] = h->g; h->res[2] = h->A; h->res[3] = h->lba;
-  h->res[4] = h->uba; h->res[5] = h->lbx; h->res[6] = h->ubx; h->res[7] = h->hh;
-  h->res[8] = h->G;
-  return wb_nmpc_condense(h->arg, h->res, h->iw, h->w, h->mem[2]);
+  const double *P = h->cfg + C_P;
+  int b, k, p, l, jj, c;
+  for (b = 0; b < NSOFT; ++b) {
+    int i = SOFT_I[b], r0 = NRN + 2 * b * NRI, r1 = NRN + (2 * b + 1) * NRI;
+    for (k = KI0; k < NN; ++k) for (p = 0; p < MINT; ++p) {
+      int col = k * MINT + p, q = (k - KI0) * MINT + p;
+      const double *Ac = h->Ai + NX * NX * col;         /* Ai_c(i, l) = Ac[i + NX l] */
+      double x = h->Zi[i + NX * col];
+      for (l = 0; l < NX; ++l) x += Ac[i + NX * l] * h->hh[NX * k + l];
+      for (jj = 0; jj < NN; ++jj) {
+        double a = 0.0;
+        if (jj < k) for (l = 0; l < NX; ++l) a += Ac[i + NX * l] * h->G[NX * k + l + NG * jj];
+        else if (jj == k) a = h->Bi[i + NX * col];
+        h->A[r0 + q + NC * jj] = h->A[r1 + q + NC * jj] = a;
+      }
+      for (c = 0; c < NZ - NN; ++c) {
+        h->A[r0 + q + NC * (NN + c)] = c == SOFT_J[b] ? 1.0 : 0.0;
+        h->A[r1 + q + NC * (NN + c)] = c == SOFT_J[b] ? -1.0 : 0.0;
+      }
+      h->lba[r0 + q] = P[P_LO + i] - x; h->uba[r0 + q] = INFINITY;
+      h->lba[r1 + q] = -INFINITY; h->uba[r1 + q] = P[P_HI + i] - x;
+    }
+  }
 #else
-  condense_nodes(h); condense_cost(h, up); condense_rows(h);
-  return 0;
+  (void)h;
 #endif
+}
+
+/* the condensed QP of the linearised plan; 0 on success */
+static int condense(wb_fast_t *h, double up) {
+  condense_nodes(h); condense_cost(h, up); condense_rows(h); condense_interior(h);
+  return 0;
 }
 
 /* one Gauss-Newton step from h->X, h->U (qp.sqp_step: linearise, condense, QP, post,
