@@ -196,6 +196,24 @@ def phase_medians(run: dict) -> dict[str, float]:
             "update": 1e6 * float(np.median(run["wall"]))}
 
 
+def _interior_row(alone: dict, ctrl) -> dict:
+    """The ``interior_limits`` row of the result: ours (adaptive) with the limits also
+    between the nodes, alone, against the issue's targets."""
+    a = dict(alone.get("adaptive_interior_limits", {}))
+    pb = getattr(ctrl, "pb", None) or ctrl._problem
+    ratio = a.get("ratio_plain_rti_osqp")
+    a.update(rows=pb.n_rows, points_per_interval=pb.m_int,
+             cost_vs_adaptive=a["cost"] / alone["adaptive"]["cost"] - 1.0,
+             met={"median_s": a["median_s"] <= TARGETS["median_s"],
+                  "cpu_p99_ms": a["cpu_p99_ms"] <= TARGETS["cpu_p99_ms"],
+                  "ratio_plain_rti_osqp": None if ratio is None
+                  else bool(ratio >= TARGETS["ratio_plain_rti_osqp"])},
+             description="ours, adaptive, with the stroke, pressure and speed limits also "
+                         "at the RK4 substep ends between the nodes (the NMPC's default; "
+                         "the baselines and the headline keep them at the nodes), alone")
+    return a
+
+
 def _compiled(ctrls: dict, jit: bool) -> tuple[dict, str | None]:
     """The controllers as :class:`~workbench.controllers.mpc.fast.CompiledNMPC` (the
     whole sample one C call), or as they are and why not (no compiler, ``jit`` off)."""
@@ -273,7 +291,9 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
     span, :data:`ADAPTIVE`), ``targets_met`` (which configuration meets which of the
     issue's targets, :func:`targets_met`), ``alone`` (ours and the
     plain RTI each in a loop of its own, see :func:`_alone`) and ``variants`` (the
-    friction, deadband and line models, :mod:`.mpc_variants`).
+    friction, deadband and line models, :mod:`.mpc_variants`) and ``interior_limits``
+    (adaptive with the limits also between the nodes, the NMPC's default, alone; the
+    headline and the baselines keep them at the nodes).
     """
     from ..controllers.mpc import NMPC
     from ..plant import Plant
@@ -302,8 +322,11 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
         ctrls.update(old)
     rows = _baseline_rows(sc, ctrls, missing)
     head = sc["rti"]
-    alone = _alone(plant, {k: ours[k] for k in ("rti", "sqp2", "adaptive", "rti_nmpc")}, nmpc,
-                   ref, duration,
+    # ours with the limits between the nodes too (the baselines have them at the nodes
+    # only): the cost of the NMPC's default, timed alone like the others
+    rows_on = _compiled({"a": adaptive.with_settings(interior_limits=True)}, jit)[0]["a"]
+    alone = _alone(plant, {**{k: ours[k] for k in ("rti", "sqp2", "adaptive", "rti_nmpc")},
+                           "adaptive_interior_limits": rows_on}, nmpc, ref, duration,
                    None if "plain_rti_osqp" in missing else nmpc.with_settings(jit=False))
     from .mpc_variants import variants
     var = variants(plant, ref, min(duration, 5.0), nmpc,
@@ -324,6 +347,7 @@ def bench(quick: bool = False, jit: bool = True, duration: float | None = None) 
             "compiled_phases_us": phase_medians(runs["rti"]) if "phases" in runs["rti"] else None,
             "alone": alone, "variants": var,
             "targets_met": targets_met(sc, alone, var),
+            "interior_limits": _interior_row(alone, rows_on),
             "targets_note": "judged on each configuration alone (its own loop, warm caches: "
                             "the time it would take on a controller); lockstep: interleaved "
                             "with IPOPT and do-mpc, whose samples flush the caches (the first "

@@ -44,7 +44,7 @@ def variants(plant, ref, duration: float, nmpc, make, lockstep, score) -> dict:
     """
     from ..controllers.mpc import NMPC
     settings = {k: getattr(nmpc, k) for k in ("horizon", "sample_time", "disturbance_gain",
-                                              "substeps", "jit")}
+                                              "substeps", "jit", "interior_limits")}
     out = {}
     for name, params in VARIANTS.items():
         pv = plant.with_params(**params)
