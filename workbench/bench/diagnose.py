@@ -77,4 +77,23 @@ def bench(quick: bool = False) -> dict:
                                       "make_recording_s", "concealed", "fit_before",
                                       "fit_after")},
             "named": single["named"][0], "correct": single["correct"],
-            "recording_s": duration, "cores": os.cpu_count(), "cases": cases}
+            "recording_s": duration, "cores": os.cpu_count(), "cases": cases,
+            **_contract(cases)}
+
+
+def _contract(cases: dict) -> dict:
+    """The common keys of ``workbench bench NAME --json`` (:mod:`.timing`): the
+    single-effect diagnosis's wall time as ``median_s`` (one run: a diagnosis takes
+    tens of seconds), ``error`` the fraction of cases whose named effects are not the
+    concealed ones; no plain baseline (none that a user would write for the same
+    problem has been measured)."""
+    from .timing import summary
+    single = cases["single_effect"]
+    wrong = sum(not c["correct"] for c in cases.values())
+    return {"benchmark": "diagnose", **summary([single["wall_s"]], [single["cpu_s"]]),
+            "error": wrong / len(cases),
+            "error_note": "fraction of the cases whose named effects differ from the "
+                          "concealed ones",
+            "baselines": {},
+            "baselines_note": "no plain baseline measured (issue 16 names none for "
+                              "diagnosis); median_s is one run of the single-effect case"}

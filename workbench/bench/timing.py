@@ -22,7 +22,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["summary", "interleaved", "baseline", "unavailable", "machine"]
+__all__ = ["summary", "interleaved", "baseline", "unavailable", "machine", "contract_problems"]
 
 
 def _quantiles(values) -> dict[str, float]:
@@ -101,3 +101,59 @@ def machine() -> dict[str, Any]:
     return {"cpus": os.cpu_count(), "load_average_1min": load,
             "note": "absolute times depend on the machine and its load; compare ratios "
                     "(measured interleaved in one run); final figures need a quiet machine"}
+
+
+#: the keys issue 16 asks of one benchmark's JSON beyond the common core
+_REQUIRED = {"mpc": ("cpu_p99_ms",), "simulate": ("realtime_factor",)}
+
+
+def contract_problems(res: Mapping[str, Any]) -> list[str]:
+    """What the result of ``workbench bench NAME --json`` lacks of the common contract
+    (empty: none): ``median_s`` (> 0), ``spread`` (``repeats``, wall and CPU quantiles),
+    ``error`` or ``cost``, ``baselines`` ({name: {"median_s", "error", "ratio"}}, the
+    ratio the baseline's median over ours -- over ours of the row's class where it
+    names one, ``against`` --, None where it could not run), and per
+    benchmark ``cpu_p99_ms`` (mpc), ``realtime_factor`` (simulate: simulated s over
+    ``median_s``)."""
+    out = []
+    med = res.get("median_s")
+    if not isinstance(med, (int, float)) or not med > 0:
+        out.append(f"median_s is {med!r}, not a positive number")
+    sp = res.get("spread")
+    if not isinstance(sp, Mapping) or not {"repeats", "wall_s", "cpu_s"} <= set(sp):
+        out.append("spread lacks repeats, wall_s or cpu_s")
+    else:
+        for kind in ("wall_s", "cpu_s"):
+            q = sp[kind]
+            if not (isinstance(q, Mapping) and q.get("min", -1) <= q.get("median", -2)
+                    <= q.get("max", -3)):
+                out.append(f"spread.{kind} is not min <= median <= max")
+        if isinstance(med, (int, float)) and sp["wall_s"].get("median") != med:
+            out.append("spread.wall_s.median is not median_s")
+    if res.get("error") is None and res.get("cost") is None:
+        out.append("neither error nor cost")
+    rows = res.get("baselines")
+    if not isinstance(rows, Mapping):
+        out.append("no baselines mapping")
+        rows = {}
+    for name, row in rows.items():
+        missing = {"median_s", "error", "ratio"} - set(row)
+        if missing:
+            out.append(f"baseline {name} lacks {', '.join(sorted(missing))}")
+        elif row["median_s"] is not None and "against" in row:
+            if not (isinstance(row["ratio"], (int, float)) and row["ratio"] > 0):
+                out.append(f"baseline {name}: no ratio to ours ({row['against']})")
+        elif row["median_s"] is not None and isinstance(med, (int, float)) and med > 0:
+            if row["ratio"] is None or abs(row["ratio"] / (row["median_s"] / med) - 1) > 1e-9:
+                out.append(f"baseline {name}: ratio is not its median_s / ours")
+        elif row.get("ratio") is not None:
+            out.append(f"baseline {name}: a ratio without a median_s")
+    for key in _REQUIRED.get(res.get("benchmark"), ()):
+        if not isinstance(res.get(key), (int, float)):
+            out.append(f"{key} missing")
+    if res.get("benchmark") == "simulate" and isinstance(med, (int, float)) and med > 0:
+        rf, dur = res.get("realtime_factor"), res.get("simulated_s")
+        if isinstance(rf, (int, float)) and isinstance(dur, (int, float)) \
+                and abs(rf * med / dur - 1) > 1e-9:
+            out.append("realtime_factor is not simulated_s / median_s")
+    return out
