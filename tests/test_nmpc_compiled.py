@@ -33,7 +33,8 @@ def rig25():
 
 @pytest.fixture(scope="module")
 def nmpc(rig25):
-    # the force observer on (its estimate is part of the memory compared), N = 5
+    # the force observer on (its estimate is part of the memory compared), N = 5; the
+    # defaults otherwise (limits between the nodes too: 3 points per interval)
     return NMPC.for_plant(rig25, horizon=5, sample_time=0.01, jit=False)
 
 
@@ -109,15 +110,17 @@ def test_compiled_sample_follows_a_preview(rig25, nmpc):
     # the same plans although DAQP saw only the rows of the last working set and those
     # its solution violated (fast_c): on this loop limits were active (rows given),
     # rows were added (a second DAQP call in an RTI sample), and the QP was never
-    # solved on all its 40 rows (the rows given: a sum over a sample's DAQP calls)
+    # solved on all its rows (136: 2 x 4 limits x (5 nodes + 4 x 3 points between
+    # them); the rows given: a sum over a sample's DAQP calls)
     calls, rows, full = np.array(counts).T
+    assert pv._problem.n_rows == 136
     assert rows.sum() > 0 and calls[5:].max() >= 2 and full.sum() == 0
-    assert np.all(rows < 40 * calls)
+    assert np.all(rows < 136 * calls)
 
 
 def test_compiled_sample_with_limits_between_the_nodes(rig25, nmpc):
-    # limits also at the RK4 substep between two nodes: the driver condenses with the
-    # generated qp.condense (its interior rows), not its own loop; two substeps
+    # limits also at the RK4 substep between two nodes (two substeps: one point each;
+    # the fixture's default has three), the rows condensed by the driver
     il = nmpc.with_settings(interior_limits=True, substeps=2)
     counts = []
     assert _compare(rig25, CompiledNMPC(il), il, 140, counts) <= 1e-8
@@ -137,7 +140,8 @@ def test_full_qp_fallback_without_a_speed_limit(rig25, nmpc, monkeypatch):
     counts = []
     assert _compare(rig25, CompiledNMPC(free), free, 140, counts) <= 1e-8
     calls, rows, full = np.array(counts).T
-    assert np.all(full == calls) and np.all(rows == 30 * calls)
+    n_rows = free._problem.n_rows                  # 2 x 3 limits x (5 nodes + 4 x 3 points)
+    assert n_rows == 102 and np.all(full == calls) and np.all(rows == n_rows * calls)
 
 
 def test_plans_stay_inside_the_command_range(rig25, nmpc, fast):
