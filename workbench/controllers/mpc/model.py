@@ -17,7 +17,8 @@ from ...errors import InputError
 from ...integrate import RK4, explicit_rk
 
 __all__ = ["STATE_EFFECTS", "NMPC_STATES", "V_SCALE", "VALVE_MAP_EFFECTS", "prediction_model",
-           "planning_model", "horizon_reference", "interval_maps", "interior_map"]
+           "planning_model", "horizon_reference", "interval_maps", "interior_map",
+           "friction_velocity", "MIN_FRICTION_VELOCITY"]
 
 #: Effects of the valve's static command map that the NMPC plans through (it plans in
 #: the compensated command; see :func:`planning_model`).
@@ -37,6 +38,9 @@ NMPC_STATES = ("x", "v", "p_a", "p_b")
 #: m/s: velocity scale of the scaled state (position and pressures scale by stroke
 #: and supply pressure).
 V_SCALE = 1.0
+#: m/s: the sharpest tanh width of the prediction's dry friction (the width of
+#: :func:`workbench.physics.friction.smooth_friction`'s default).
+MIN_FRICTION_VELOCITY = 1e-3
 
 
 def prediction_model(plant, effects: Sequence[str] | None = None):
@@ -151,15 +155,74 @@ def horizon_reference(r: float, r_prev: float | None, sample_time: float, horizo
 
 
 
-def _scaled_rhs(model, scales, u_center: float, u_span: float):
-    """Symbols z, w, d, the scaled right-hand side fz (SX) and it as a Function."""
+def friction_velocity(model, sample_time: float, substeps: int) -> float | None:
+    """Tanh width v_e (m/s) of the dry friction the NMPC predicts with, or None
+    without dry friction.
+
+    The smooth friction F_f = F_str(v) tanh(v / v_e) (+ viscous) has the slope
+    k = F_s / v_e + beta at v = 0, so a coasting or stuck piston's velocity decays at
+    the rate k / m. The interval map integrates it by RK4 with the step
+    h = sample_time / substeps, whose amplification per step, 1 - k h/m + ... +
+    (k h/m)^4 / 24, exceeds 1 beyond k h / m = 2.785 (the real-axis stability
+    limit): with the physics' width 1 mm/s on the precision rig (F_s 25 N, m 1.2 kg,
+    h 0.5 ms: k h / m = 10.4) one interval multiplied a velocity difference at rest
+    by 1.5e10, the predicted motion of a stuck piston was a rounding artefact, and
+    the plan iteration turned 1e-9 differences in a measurement into 1e-2 V in a
+    few samples. The width is therefore the smallest for which one RK4 step is
+    accurate, k h / m = 1 (RK4 then decays by 0.375 per step against the exact
+    exp(-1) = 0.368), i.e. v_e = F_s h / (m - beta h), and never sharper than
+    :data:`MIN_FRICTION_VELOCITY`. A wider tanh is also what the observer's velocity
+    can resolve: the 2 ms loop's 12-bit position differentiates to steps of 61 mm/s,
+    and below v_e the prediction's friction depends on the estimate's sign no more
+    than linearly. It is 10.6 mm/s on the precision rig (its Stribeck velocity is 10
+    mm/s); a stuck piston is predicted to creep at up to v_e atanh(F / F_s), which
+    the force observer and the precision hold (:mod:`workbench.controllers.hold`)
+    absorb.
+
+    Parameters
+    ----------
+    model : workbench.Plant
+        The 4-state prediction model. sample_time : s. substeps : RK4 steps per sample.
+    """
+    prm = model.params
+    if not prm.has_effect("dry_friction"):
+        return None
+    h = float(sample_time) / int(substeps)
+    m, beta = float(prm["load.mass"]), float(prm["load.viscous_friction"])
+    fs = max(float(prm["friction.static"]), float(prm["friction.coulomb"]))
+    room = m - beta * h                      # k h / m <= 1 with k = F_s / v_e + beta
+    v_e = fs * h / room if room > 0 else math.inf
+    return max(v_e, MIN_FRICTION_VELOCITY)
+
+
+def _scaled_rhs(model, scales, u_center: float, u_span: float,
+                friction_width: float | None = None):
+    """Symbols z, w, d, the scaled right-hand side fz (SX) and it as a Function.
+
+    With ``friction_width`` (m/s) the model's dry friction is the smooth law with that
+    tanh width (:func:`friction_velocity`) instead of the plant's own."""
     nx = len(scales)
     z = ca.SX.sym("z", nx)
     w = ca.SX.sym("w")
     d = ca.SX.sym("d")                                 # estimated disturbance force, N
-    pvec = ca.DM(model.p0) + d * ca.DM(
-        np.eye(len(model.p0))[:, model.param_index("load.external_force")])
-    fz = model.f(z * ca.DM(scales), u_center + u_span * w, pvec) / ca.DM(scales)
+    base, dry = model, None
+    if friction_width is not None and model.params.has_effect("dry_friction"):
+        from ...plant import Plant
+        from ...physics.friction import smooth_friction
+        prm = model.params
+        dry = (float(prm["friction.coulomb"]), float(prm["friction.static"]),
+               float(prm["friction.stribeck_velocity"]), float(prm["load.mass"]))
+        base = Plant(prm.without_effect("dry_friction"), friction="smooth")
+    pvec = ca.DM(base.p0) + d * ca.DM(
+        np.eye(len(base.p0))[:, base.param_index("load.external_force")])
+    xs = z * ca.DM(scales)
+    xdot = base.f(xs, u_center + u_span * w, pvec)
+    if dry is not None:
+        fc, fs, vs, m = dry
+        i_v = NMPC_STATES.index("v")
+        acc = xdot[i_v] - smooth_friction(xs[i_v], fc, fs, vs, 0.0, friction_width) / m
+        xdot = ca.vertcat(xdot[:i_v], acc, xdot[i_v + 1:])
+    fz = xdot / ca.DM(scales)
     return z, w, d, fz, ca.Function("wb_nmpc_f", [z, w, d], [fz])
 
 
@@ -186,8 +249,8 @@ def _rk4_states(fc, z, w, d, sample_time: float, substeps: int) -> list:
 
 
 def interval_maps(model, scales: np.ndarray, u_center: float, u_span: float,
-                  sample_time: float, substeps: int,
-                  sensitivities: str) -> tuple[ca.Function, ca.Function]:
+                  sample_time: float, substeps: int, sensitivities: str,
+                  friction_width: float | None = None) -> tuple[ca.Function, ca.Function]:
     """One shooting interval of the scaled model, and its Jacobians.
 
     Parameters
@@ -201,6 +264,9 @@ def interval_maps(model, scales: np.ndarray, u_center: float, u_span: float,
         Jacobians by the (1, 2) Pade approximant of the exponential of the
         continuous Jacobian at the interval's midpoint, or by differentiating the
         RK4 steps.
+    friction_width : float, m/s, optional
+        Tanh width of the dry friction (:func:`friction_velocity`); None: the
+        model's own smooth law.
 
     Returns
     -------
@@ -209,7 +275,7 @@ def interval_maps(model, scales: np.ndarray, u_center: float, u_span: float,
         ``load.external_force``).
     Fj : casadi.Function ``wb_nmpc_Fj(z, w, d) -> (z+, dz+/dz, dz+/dw)``.
     """
-    z, w, d, fz, fc = _scaled_rhs(model, scales, u_center, u_span)
+    z, w, d, fz, fc = _scaled_rhs(model, scales, u_center, u_span, friction_width)
     zz = _rk4_states(fc, z, w, d, sample_time, substeps)[-1]
     F = ca.Function("wb_nmpc_F", [z, w, d], [zz])
     if sensitivities == "exact":
@@ -221,11 +287,13 @@ def interval_maps(model, scales: np.ndarray, u_center: float, u_span: float,
 
 def interior_map(model, scales: np.ndarray, u_center: float, u_span: float,
                  sample_time: float, substeps: int, sensitivities: str,
-                 points: Sequence[int] | None = None) -> ca.Function | None:
+                 points: Sequence[int] | None = None,
+                 friction_width: float | None = None) -> ca.Function | None:
     """The states between the shooting nodes (RK4 substeps' ends), and their
     Jacobians, for limits enforced between the nodes.
 
-    Same parameters as :func:`interval_maps`; ``points`` are the substep ends j (1 ..
+    Same parameters as :func:`interval_maps` (and ``friction_width``); ``points`` are
+    the substep ends j (1 ..
     ``substeps`` - 1; default all of them). The Jacobians of the point at time j h
     (h = sample_time / substeps) are the Pade approximant over j h, or exact.
 
@@ -240,7 +308,7 @@ def interior_map(model, scales: np.ndarray, u_center: float, u_span: float,
         raise InputError(f"interior points are substep ends 1 .. {substeps - 1}, got {pts_at}")
     if not pts_at:
         return None
-    z, w, d, fz, fc = _scaled_rhs(model, scales, u_center, u_span)
+    z, w, d, fz, fc = _scaled_rhs(model, scales, u_center, u_span, friction_width)
     ends = _rk4_states(fc, z, w, d, sample_time, substeps)
     pts = [ends[j - 1] for j in pts_at]
     jz, jw = [], []
