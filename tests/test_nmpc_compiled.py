@@ -214,6 +214,8 @@ def test_nmpc_update_runs_the_compiled_sample(rig25, nmpc):
     s4, _ = on.update(s3, 0.40, y)                         # back on the first branch
     s4b, _ = on.update(s3b, 0.40, y)
     assert np.array_equal(s4.X, s4b.X) and s4.t == s4b.t == pytest.approx(0.03)
+    with pytest.raises(ValueError):                        # read-only: not read back
+        s4.X[0, 0] = 0.3
 
 
 @pytest.mark.parametrize("jit", [False, True])

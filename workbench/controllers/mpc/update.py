@@ -155,8 +155,9 @@ def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
     The compiled sample works on a :class:`.fast.CompiledMemory` buffer. The buffer
     behind the state this problem returned last is kept (``pb._compiled_last``) and
     updated in place when that state comes back (a closed loop); any other state is
-    copied into a fresh buffer. The new state's X, U, z and working set are copies
-    (numpy: a casadi.DM each would cost 30 us a sample).
+    copied into a fresh buffer. The new state's X, U, z and working set are read-only
+    copies (numpy: a casadi.DM each would cost 30 us a sample; read-only: the buffer,
+    not the state, is read back at the next sample).
     """
     last = getattr(pb, "_compiled_last", None)
     if state is not None and last is not None and last[0] is state:
@@ -172,6 +173,8 @@ def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
                     r_prev=r, z=b[o["z"]:o["z"] + 4].copy(), d=float(b[o["d"]]), lam=None,
                     info=mem.step_info(pb, time.perf_counter() - t0), t=float(b[o["t"]]),
                     working_set=b[o["ws"]:].copy())
+    for a in (new.X, new.U, new.z, new.working_set):
+        a.flags.writeable = False
     pb._compiled_last = (new, mem)
     return new
 
