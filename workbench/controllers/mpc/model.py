@@ -64,7 +64,8 @@ def prediction_model(plant, effects: Sequence[str] | None = None):
     are faster than the delay: predicted over it, the pressures settle to what the
     last command holds, while the real chamber behind its line does not. Of the
     other effects only those in ``effects`` are kept (default: all of them, e.g. dry
-    friction, deadband, leakage). Dry friction takes its smooth (differentiable) form.
+    friction, deadband, leakage). Dry friction takes its smooth (differentiable) form;
+    the NMPC predicts it with the width of :func:`friction_velocity`.
 
     Parameters
     ----------
