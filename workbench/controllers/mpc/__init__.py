@@ -53,7 +53,11 @@ but is only close to optimal (on the tests, 1e-3 V from IPOPT's commands);
 The controller reads the full state (x, v, p_a, p_b) from the measurements the
 simulator passes; its prediction model must therefore be a 4-state plant
 (:meth:`NMPC.for_plant` reduces any plant file to one: lines, spool dynamics, heat
-transfer and supply droop are left to the feedback). A valve deadband
+transfer and supply droop are left to the feedback). Dry friction is predicted in
+its smooth form, F_str(v) tanh(v / v_e), with v_e half the Stribeck velocity and
+as many RK4 substeps as that needs for one step to resolve the decay at rest
+(:func:`.model.friction_velocity`): with too few, RK4 is unstable there, and the
+prediction of a stuck piston, and with it the plan, turned on rounding. A valve deadband
 or null offset in the model is planned through: the NMPC plans in the compensated
 command (its model has no dead zone, where a linearisation at the centre would have
 no authority) and applies the plan through the deadband inverse

@@ -65,7 +65,9 @@ class NMPC:
         fractions of the stroke and of the supply pressure. The L1 weight must exceed
         the constraints' multipliers for the penalty to be exact.
     substeps : int
-        RK4 steps per shooting interval.
+        RK4 steps per shooting interval, at least: with dry friction the problem
+        takes more, up to :data:`.model.MAX_SUBSTEPS`, if the friction's width
+        needs them (:func:`.model.friction_velocity`).
     sensitivities : {"pade", "exact"}
         Interval Jacobians: Pade approximant of the exponential of the midpoint
         Jacobian (cheap) or the derivative of the RK4 steps (exact).
@@ -113,9 +115,10 @@ class NMPC:
         :class:`~workbench.references.Trajectory`).
     friction_width : float or None, m/s
         Tanh width v_e of the model's dry friction, F_str(v) tanh(v / v_e); None
-        (default): :func:`.model.friction_velocity`, the sharpest one the RK4
-        substep integrates accurately (10.6 mm/s on the 2 ms precision rig; the
-        physics' 1 mm/s made the prediction of a stuck piston a rounding artefact).
+        (default): half the Stribeck velocity, with the substeps raised so that RK4
+        integrates it accurately (:func:`.model.friction_velocity`; 5 mm/s and 9
+        substeps on the 2 ms precision rig: the physics' 1 mm/s with 4 substeps made
+        the prediction of a stuck piston a rounding artefact).
     compiled_sample : bool
         With ``jit``, modes rti and sqp and DAQP: run each update as one
         compiled C call (:mod:`.fast`; same plans). :attr:`compiled_reason` says why

@@ -18,7 +18,7 @@ from ...integrate import RK4, explicit_rk
 
 __all__ = ["STATE_EFFECTS", "NMPC_STATES", "V_SCALE", "VALVE_MAP_EFFECTS", "prediction_model",
            "planning_model", "horizon_reference", "interval_maps", "interior_map",
-           "friction_velocity", "MIN_FRICTION_VELOCITY"]
+           "friction_velocity", "MIN_FRICTION_VELOCITY", "MAX_SUBSTEPS"]
 
 #: Effects of the valve's static command map that the NMPC plans through (it plans in
 #: the compensated command; see :func:`planning_model`).
@@ -38,9 +38,12 @@ NMPC_STATES = ("x", "v", "p_a", "p_b")
 #: m/s: velocity scale of the scaled state (position and pressures scale by stroke
 #: and supply pressure).
 V_SCALE = 1.0
-#: m/s: the sharpest tanh width of the prediction's dry friction (the width of
-#: :func:`workbench.physics.friction.smooth_friction`'s default).
+#: m/s: the sharpest default tanh width of the prediction's dry friction (the width
+#: of :func:`workbench.physics.friction.smooth_friction`'s default).
 MIN_FRICTION_VELOCITY = 1e-3
+#: Most RK4 substeps per interval :func:`friction_velocity` raises the NMPC's
+#: ``substeps`` to (4x the default: the interval map's cost grows with them).
+MAX_SUBSTEPS = 16
 
 
 def prediction_model(plant, effects: Sequence[str] | None = None):
@@ -61,7 +64,8 @@ def prediction_model(plant, effects: Sequence[str] | None = None):
     are faster than the delay: predicted over it, the pressures settle to what the
     last command holds, while the real chamber behind its line does not. Of the
     other effects only those in ``effects`` are kept (default: all of them, e.g. dry
-    friction, deadband, leakage). Dry friction takes its smooth (differentiable) form.
+    friction, deadband, leakage). Dry friction takes its smooth (differentiable) form;
+    the NMPC predicts it with the width of :func:`friction_velocity`.
 
     Parameters
     ----------
@@ -155,44 +159,70 @@ def horizon_reference(r: float, r_prev: float | None, sample_time: float, horizo
 
 
 
-def friction_velocity(model, sample_time: float, substeps: int) -> float | None:
-    """Tanh width v_e (m/s) of the dry friction the NMPC predicts with, or None
-    without dry friction.
+def friction_velocity(model, sample_time: float, substeps: int,
+                      width: float | None = None) -> tuple[float | None, int]:
+    """Tanh width v_e (m/s) of the dry friction the NMPC predicts with, and the RK4
+    substeps per interval that integrate it: ``(None, substeps)`` without dry friction.
 
     The smooth friction F_f = F_str(v) tanh(v / v_e) (+ viscous) has the slope
     k = F_s / v_e + beta at v = 0, so a coasting or stuck piston's velocity decays at
     the rate k / m. The interval map integrates it by RK4 with the step
-    h = sample_time / substeps, whose amplification per step, 1 - k h/m + ... +
-    (k h/m)^4 / 24, exceeds 1 beyond k h / m = 2.785 (the real-axis stability
-    limit): with the physics' width 1 mm/s on the precision rig (F_s 25 N, m 1.2 kg,
+    h = sample_time / n, whose amplification per step, 1 - k h/m + ... + (k h/m)^4 /
+    24, exceeds 1 beyond k h / m = 2.785 (the real-axis stability limit): with the
+    physics' width 1 mm/s and 4 substeps on the precision rig (F_s 25 N, m 1.2 kg,
     h 0.5 ms: k h / m = 10.4) one interval multiplied a velocity difference at rest
-    by 1.5e10, the predicted motion of a stuck piston was a rounding artefact, and
-    the plan iteration turned 1e-9 differences in a measurement into 1e-2 V in a
-    few samples. The width is therefore the smallest for which one RK4 step is
-    accurate, k h / m = 1 (RK4 then decays by 0.375 per step against the exact
-    exp(-1) = 0.368), i.e. v_e = F_s h / (m - beta h), and never sharper than
-    :data:`MIN_FRICTION_VELOCITY`. A wider tanh is also what the observer's velocity
-    can resolve: the 2 ms loop's 12-bit position differentiates to steps of 61 mm/s,
-    and below v_e the prediction's friction depends on the estimate's sign no more
-    than linearly. It is 10.6 mm/s on the precision rig (its Stribeck velocity is 10
-    mm/s); a stuck piston is predicted to creep at up to v_e atanh(F / F_s), which
-    the force observer and the precision hold (:mod:`workbench.controllers.hold`)
-    absorb.
+    by 1.5e10, the predicted motion of a stuck piston was a rounding artefact, and the
+    plan iteration turned 1e-9 m in a measurement into volts of command within one
+    sample. Two rules therefore:
+
+    * the width is ``width`` if given, else half the plant file's Stribeck velocity
+      v_s: then tanh(v_s / v_e) = 0.96 and the prediction follows the file's Stribeck
+      curve from v_s on (a width near v_s flattens the drop from static to Coulomb
+      friction that breaks a reversal away);
+    * one RK4 step resolves the decay, k h / m <= 1 (RK4 then decays by 0.375 per
+      step against the exact exp(-1) = 0.368): the substeps are raised from
+      ``substeps`` to the fewest that do, at most :data:`MAX_SUBSTEPS` (the interval
+      map's cost grows with them); beyond that the width is widened to
+      F_s h / (m - beta h) instead.
+
+    Precision rig, 2 ms: v_e = 5 mm/s with 9 substeps. Below v_e the prediction's
+    friction depends on the estimated velocity's sign no more than linearly, and the
+    velocity decays within one substep, so the observer's velocity noise at rest
+    (0.2 mm/s from 300 Pa pressure noise; up to K_v q / sqrt(12) = 12 mm/s while the
+    12-bit position steps) moves the plan only over that substep.
 
     Parameters
     ----------
     model : workbench.Plant
-        The 4-state prediction model. sample_time : s. substeps : RK4 steps per sample.
+        The 4-state prediction model. sample_time : s. substeps : int, at least.
+    width : float, m/s, optional
+        The tanh width wanted (default v_s / 2).
+
+    Returns
+    -------
+    (float or None, int)
+        v_e in m/s (None without dry friction), RK4 substeps per interval.
     """
     prm = model.params
+    n = int(substeps)
     if not prm.has_effect("dry_friction"):
-        return None
-    h = float(sample_time) / int(substeps)
+        return None, n
+    T = float(sample_time)
     m, beta = float(prm["load.mass"]), float(prm["load.viscous_friction"])
     fs = max(float(prm["friction.static"]), float(prm["friction.coulomb"]))
-    room = m - beta * h                      # k h / m <= 1 with k = F_s / v_e + beta
-    v_e = fs * h / room if room > 0 else math.inf
-    return max(v_e, MIN_FRICTION_VELOCITY)
+    v_e = (max(0.5 * float(prm["friction.stribeck_velocity"]), MIN_FRICTION_VELOCITY)
+           if width is None else float(width))
+
+    def resolved(k: int) -> bool:                     # k h / m <= 1
+        return (fs / v_e + beta) * (T / k) <= m * (1.0 + 1e-12)
+
+    while not resolved(n) and n < MAX_SUBSTEPS:
+        n += 1
+    if not resolved(n):
+        h = T / n
+        room = m - beta * h
+        v_e = fs * h / room if room > 0 else math.inf
+    return v_e, n
 
 
 def _scaled_rhs(model, scales, u_center: float, u_span: float,

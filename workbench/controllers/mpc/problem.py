@@ -38,8 +38,9 @@ class Problem:
     model : the model planned with (:func:`.model.planning_model`: without deadband
         and null offset); valve : its DeadbandInverse (plan -> valve command, V), or
         None.
-    friction_width : m/s, tanh width of the predicted dry friction
-        (:func:`.model.friction_velocity` unless set; None without dry friction).
+    friction_width, substeps : m/s, tanh width of the predicted dry friction (None
+        without), and the RK4 substeps per interval (:func:`.model.friction_velocity`:
+        the NMPC's ``substeps``, more to resolve the friction).
     P : settings vector. F, Fj : interval map and its Jacobians (:mod:`.model`).
     points : the RK4 substep ends limited inside each interval
         (:func:`.limits.interior_points`; empty: limits at the nodes only).
@@ -59,18 +60,17 @@ class Problem:
         self._scaling(self.model)
         self._limits(c)
         self.P = self._settings_vector(c)
-        #: m/s, tanh width of the predicted dry friction (None: no dry friction)
-        self.friction_width = (friction_velocity(self.model, self.T, c.substeps)
-                               if c.friction_width is None or not
-                               self.model.params.has_effect("dry_friction")
-                               else float(c.friction_width))
+        #: m/s, tanh width of the predicted dry friction (None: none), and the RK4
+        #: substeps per interval that resolve it (:func:`.model.friction_velocity`)
+        self.friction_width, self.substeps = friction_velocity(self.model, self.T, c.substeps,
+                                                               c.friction_width)
         self.F, self.Fj = interval_maps(self.model, self.sx, self.u_c, self.u_s, self.T,
-                                        c.substeps, c.sensitivities, self.friction_width)
+                                        self.substeps, c.sensitivities, self.friction_width)
         # limits also between the nodes, at RK4 substep ends at most LIMIT_SPACING apart
         # (not for IPOPT: cold-started, it did not converge in 300 iterations with them)
-        self.points = (interior_points(self.T, c.substeps)
+        self.points = (interior_points(self.T, self.substeps)
                        if c.interior_limits and c.mode != "ipopt" else ())
-        self.Fi = interior_map(self.model, self.sx, self.u_c, self.u_s, self.T, c.substeps,
+        self.Fi = interior_map(self.model, self.sx, self.u_c, self.u_s, self.T, self.substeps,
                                c.sensitivities, self.points,
                                self.friction_width) if self.points else None
         self.m_int = len(self.points)
