@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["c_kernel", "run_c", "CHUNK", "FLAGS"]
+__all__ = ["c_kernel", "run_c", "CHUNK", "FLAGS", "MAX_PARAMETERS"]
 
 #: samples per C call: ~2 ms at 4 parameters (Ctrl-C and the progress bar between calls)
 CHUNK = 1 << 15
@@ -134,6 +134,10 @@ int wb_rls_run(long N, const double *y, const double *u, int na, int nk, double 
 }
 """
 
+#: largest number of parameters the C loop takes: its matrices live on the stack
+#: (3 n^2 doubles: 98 kB at 64); beyond it the numpy loop runs
+MAX_PARAMETERS = 64
+
 _KERNELS: dict[int, Callable | None] = {}
 
 
@@ -144,7 +148,10 @@ def source(n: int) -> str:
 
 def c_kernel(n: int) -> Callable | None:
     """The compiled loop for ``n`` parameters (built once, cached on disk and here),
-    or None without a C compiler or when the source does not compile."""
+    or None without a C compiler, when the source does not compile, or above
+    :data:`MAX_PARAMETERS`."""
+    if n > MAX_PARAMETERS:
+        return None
     if n in _KERNELS:
         return _KERNELS[n]
     from ...integrate.jit import CompileError, have_compiler, shared_library

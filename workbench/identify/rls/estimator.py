@@ -499,8 +499,10 @@ def _choose_method(method: str, npar: int, nsamples: int) -> str:
     if method in ("auto", "c") and c_kernel(npar) is not None:
         return "c"
     if method == "c":
-        raise InputError("method='c' needs a C compiler (none found: set CC); use "
-                         "method='auto', 'casadi' or 'numpy'")
+        from .ckernel import MAX_PARAMETERS
+        why = (f"takes at most {MAX_PARAMETERS} parameters, not {npar}"
+               if npar > MAX_PARAMETERS else "needs a C compiler (none found: set CC)")
+        raise InputError(f"method='c' {why}; use method='auto', 'casadi' or 'numpy'")
     compile_s = _COMPILE_SECONDS_AT_8 * (npar / 8.0) ** 3
     if method == "casadi" and npar > _CASADI_MAX_PARAMETERS:
         raise InputError(f"method='casadi' with {npar} parameters would spend about "
