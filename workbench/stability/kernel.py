@@ -3,10 +3,12 @@
 For a block of N points (positions, parameter columns, controller gains) the
 :class:`_Sweeper` of a plant computes
 
-1. the equilibria, by a fixed Gauss-Newton iteration compiled into one CasADi
-   Function mapped over the block (:func:`_equilibrium_function`; points it misses are
-   re-solved one by one with :func:`workbench.equilibrium.operating_point`);
-2. the tangent models (A, B), one CasADi Jacobian mapped over the block;
+1. the equilibria, by a fixed Gauss-Newton iteration (:func:`_equilibrium_function`),
+   and the tangent models (A, B) there, as one CasADi Function (``wb_point``)
+   compiled to C and mapped over the block's distinct points, evaluated through
+   CasADi's function buffer straight into NumPy arrays; points the iteration misses
+   are re-solved one by one with :func:`workbench.equilibrium.operating_point`;
+2. the velocity gain Kv of each tangent model;
 3. the ZOH discretisation, by the batched Pade matrix exponential :func:`expm_batched`;
 4. the discrete PID loop (with any computation delay) closed around the position
    (:func:`_closed_loop`);
@@ -206,32 +208,18 @@ class _Sweeper:
         A, B = A.reshape(-1, n, n).transpose(0, 2, 1), B[:, :, None]
         if fallbacks:
             ok = bad & np.isfinite(res)
-            if ok.any():
-                A[ok], B[ok] = self.tangents(st[ok], u[ok], P[:, ok])
+            if ok.any():                        # few points: CasADi's virtual machine
+                Af, Bf = _mapped_call(self._jac, [st[ok], u[ok, None], P[:, ok].T])
+                A[ok], B[ok] = Af.reshape(-1, n, n).transpose(0, 2, 1), Bf[:, :, None]
         return st, u, res, A, B, fallbacks
 
     # -- one block of points
     def evaluate(self, positions, P, kp, kd, ki, T, k0=None) -> dict:
         """Everything of a block; arrays of length N (k0: kp from k0/Kv when given)."""
-        # one equilibrium per distinct (position, equilibrium-relevant parameters), one
-        # tangent per distinct (position, parameters)
-        rel = [k for k, nm in enumerate(self.param_names) if self.eq_depends[nm]]
-        first_t, inv_t = _unique_rows(np.column_stack([positions, P.T]))
-        varies = np.any(P != P[:, :1], axis=1)
-        if varies[rel].sum() == varies.sum():       # what varies moves the equilibrium
-            first_e = first_t
-        else:
-            first_e, inv_e = _unique_rows(np.column_stack([positions, P[rel].T]))
-        if 2 * len(first_e) <= len(first_t):        # few equilibria, many tangents
-            st, u, res, fallbacks = self.equilibria(positions[first_e], P[:, first_e])
-            st, u, res = st[inv_e], u[inv_e], res[inv_e]
-            ok = np.isfinite(res)
-            st, u = np.where(ok[:, None], st, 0.0), np.where(ok, u, 0.0)
-            A, B = self.tangents(st[first_t], u[first_t], P[:, first_t])
-        else:
-            st, u, res, A, B, fallbacks = self.points(positions[first_t], P[:, first_t])
-            u, res = u[inv_t], res[inv_t]
-        A, B = A[inv_t], B[inv_t]
+        # one equilibrium and tangent per distinct (position, parameters)
+        first, inv = _unique_rows(np.column_stack([positions, P.T]))
+        _, u, res, A, B, fallbacks = self.points(positions[first], P[:, first])
+        u, res, A, B = u[inv], res[inv], A[inv], B[inv]
         ok = np.isfinite(res)
         A[~ok], B[~ok] = 0.0, 0.0                            # no equilibrium: blank point
         S = self.state_scale
@@ -272,10 +260,14 @@ class _Sweeper:
         return _visible_radius(Acl, Br)
 
     def dominant(self, st, u, P):
-        """w0, zeta, Kv of the dominant mode pair of the open-loop tangent (for the
-        classical boundaries). Modes ranked by their share |residue / lambda| of the
-        position response; integrators and hidden modes skipped."""
-        A, B = self.tangents(st, u, P)
+        """w0, zeta, Kv of the dominant mode pair of the open-loop tangent at states
+        ``st``, commands ``u`` and parameter columns ``P`` (:meth:`dominant_of`)."""
+        return self.dominant_of(*self.tangents(st, u, P))
+
+    def dominant_of(self, A, B):
+        """w0, zeta, Kv of the dominant mode pair of the open-loop tangents (A, B) (for
+        the classical boundaries). Modes ranked by their share |residue / lambda| of
+        the position response; integrators and hidden modes skipped."""
         S = self.state_scale
         As = A * S[None, None, :] / S[None, :, None]
         Bs = B / S[None, :, None] * self.u_scale
