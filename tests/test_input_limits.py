@@ -35,7 +35,7 @@ def test_rls_with_40_parameters_on_1001_samples_is_fast_and_right():
     # 1001 samples x ~0.15 ms per sample with numpy; 20 s leaves room for a loaded CI
     # machine and is still 6x below what the symbolic build took.
     assert elapsed < 20.0, elapsed
-    assert res.method == "numpy"
+    assert res.method in ("c", "numpy")      # the plain C loop when a compiler is present
     # Independent check: with lambda = 1, RLS from theta0 = 0, P0 = p0 I is exactly the
     # regularised least-squares solution (Phi'Phi + I/p0)^-1 Phi'y on the same rows.
     na = nb = 20

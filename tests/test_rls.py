@@ -198,9 +198,27 @@ def test_choose_forgetting_time_varying_vs_invariant(tv_records):
 # --------------------------------------------------------------------------------------
 # The compiled loop against the plain numpy loop
 # --------------------------------------------------------------------------------------
-def test_compiled_equals_numpy_loop():
-    # 2100 samples: two full chunks of the compiled loop plus a padded partial one; a
-    # stretch without input excitation makes the trace bound act (lambda_k > lambda).
+def _assert_same_tracks(fast, slow):
+    # same arithmetic, different evaluation order (the C loop multiplies the Joseph form
+    # out, CasADi and numpy evaluate (I - K phi') P~ (I - K phi')' + K K'): rounding only
+    # (1e-9 on estimates of order 1 and errors of order 0.1; 1e-9 relative on the stds)
+    np.testing.assert_allclose(fast.theta, slow.theta, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fast.errors, slow.errors, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fast.std, slow.std, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(fast.noise_variance, slow.noise_variance, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(fast.effective_forgetting, slow.effective_forgetting,
+                               rtol=1e-12)
+    np.testing.assert_allclose(fast.covariance, slow.covariance, rtol=1e-8, atol=0)
+    np.testing.assert_array_equal(fast.time, slow.time)
+
+
+def test_compiled_loops_equal_numpy_loop(monkeypatch):
+    # 2100 samples: two full chunks of CasADi's compiled loop plus a padded partial one;
+    # the C loop in chunks of 500 (four calls and a partial one, the state carried
+    # between them); a stretch without input excitation makes the trace bound act
+    # (lambda_k > lambda).
+    from workbench.identify.rls import ckernel
+    monkeypatch.setattr(ckernel, "CHUNK", 500)
     rng = np.random.default_rng(5)
     y, u = simulate_ti(2100, seed=5)
     u = u.copy()
@@ -208,18 +226,35 @@ def test_compiled_equals_numpy_loop():
     y = lfilter([0.0, TRUE[2], TRUE[3]], [1.0, TRUE[0], TRUE[1]], u) \
         + 0.1 * rng.standard_normal(u.size)
     for lam in (0.9, 0.99):
-        fast = rls(y, u, (2, 2, 1), forgetting=lam, sample_time=0.01)
-        slow = rls(y, u, (2, 2, 1), forgetting=lam, sample_time=0.01, method="numpy")
-        assert fast.method in ("compiled", "casadi") and slow.method == "numpy"
+        kw = dict(forgetting=lam, sample_time=0.01)
+        slow = rls(y, u, (2, 2, 1), method="numpy", **kw)
+        assert slow.method == "numpy"
+        if ckernel.c_kernel(4) is not None:
+            fast = rls(y, u, (2, 2, 1), **kw)
+            assert fast.method == "c"
+            _assert_same_tracks(fast, slow)
+        cas = rls(y, u, (2, 2, 1), method="casadi", **kw)
+        assert cas.method in ("compiled", "casadi")
+        _assert_same_tracks(cas, slow)
         if lam == 0.9:
-            assert fast.bound_active_fraction > 0.0
-        # same arithmetic, different evaluation order: rounding only (1e-9)
-        np.testing.assert_allclose(fast.theta, slow.theta, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(fast.errors, slow.errors, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(fast.std, slow.std, rtol=1e-9, atol=0)
-        np.testing.assert_allclose(fast.effective_forgetting, slow.effective_forgetting,
-                                   rtol=1e-12)
-        np.testing.assert_array_equal(fast.time, slow.time)
+            assert slow.bound_active_fraction > 0.0
+
+
+@pytest.mark.parametrize("orders", [(1, 0, 0), (0, 2, 0), (3, 1, 2), (2, 3, 0), (1, 2, 4)])
+def test_c_loop_regressors_for_other_orders(orders):
+    # The C loop forms the regressors itself from y and u; the numpy loop runs on
+    # regressors(): both orders conventions (na = 0, nb = 0, nk = 0, nk > na) must agree.
+    from workbench.identify.rls import ckernel
+    if ckernel.c_kernel(orders[0] + orders[1]) is None:
+        pytest.skip("no C compiler")
+    rng = np.random.default_rng(9)
+    u = prbs(700, rng)
+    y = lfilter([0.0, 0.3, 0.2], [1.0, -0.9], u) + 0.05 * rng.standard_normal(700)
+    uu = None if orders[1] == 0 else u
+    fast = rls(y, uu, orders, forgetting=0.98, method="c")
+    slow = rls(y, uu, orders, forgetting=0.98, method="numpy")
+    assert fast.start_index == slow.start_index == max(orders[0], orders[2] + orders[1] - 1)
+    _assert_same_tracks(fast, slow)
 
 
 def test_trace_bound_prevents_wind_up():
@@ -509,7 +544,7 @@ def test_cli_summary_every_value(tmp_path, capsys):
     assert s["forgetting_choice"] is None
     assert s["files"] == {"estimates": str(out / "estimates.csv"),
                           "report": str(out / "report.md"), "summary": str(out / "summary.json")}
-    assert s["recording"] == str(rec_path) and s["method"] in ("compiled", "casadi", "numpy")
+    assert s["recording"] == str(rec_path) and s["method"] in ("c", "compiled", "casadi", "numpy")
 
 
 def test_cli_forgetting_choice_values(tmp_path, capsys):

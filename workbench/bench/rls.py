@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from ..identify.rls import rls
-from ..identify.rls.kernels import chunk_function
+from ..identify.rls.ckernel import c_kernel
 from .timing import baseline, interleaved, machine, summary, unavailable
 
 __all__ = ["bench"]
@@ -33,9 +33,11 @@ def _bench_data(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarr
 def bench(quick: bool = False) -> dict:
     """RLS over 10^6 samples (orders 2 2 1, 4 parameters, lambda 0.99; ``quick``: 10^5).
 
-    Ours: :func:`workbench.identify.rls.rls` end to end (checks, regressors, compiled
-    loop, result). Baseline ``numba_loop``: the same recursion as a numba-compiled
-    scalar loop on the same regressors (its compile time apart). The old baseline, a
+    Ours: :func:`workbench.identify.rls.rls` end to end (checks, the plain C loop of
+    :mod:`workbench.identify.rls.ckernel` forming the regressors itself, result).
+    Baseline ``numba_loop``: the same recursion as a numba-compiled scalar loop
+    (symmetric covariance update) on regressors built beforehand, untimed (its compile
+    time apart). The old baseline, a
     numpy per-sample loop, runs on the first 20 000 samples (5 000 quick), extrapolated,
     and is the accuracy reference: ``error`` is the largest difference of the estimates
     from it on those samples (theta, dimensionless coefficients).
@@ -47,7 +49,7 @@ def bench(quick: bool = False) -> dict:
     orders = (2, 2, 1)
     y, u, truth = _bench_data(n)
     t0 = time.perf_counter()
-    chunk_function(4)
+    c_kernel(4)
     build = time.perf_counter() - t0
     ref = rls(y[:n_loop], u[:n_loop], orders, forgetting=0.99, sample_time=0.01, method="numpy")
     kw = dict(forgetting=0.99, sample_time=0.01)
@@ -67,8 +69,9 @@ def bench(quick: bool = False) -> dict:
     ours = res["ours"]
     err = float(np.max(np.abs(ours.theta[:m] - ref.theta)))
     med, cpu_med = stats["ours"]["median_s"], stats["ours"]["cpu_median_s"]
-    desc = ("the same recursion (Joseph form, bounded forgetting, stds) as a numba-compiled "
-            "scalar loop over the regressors")
+    desc = ("the same recursion (Joseph form on the upper triangle, bounded forgetting, "
+            "stds) as a numba-compiled scalar loop over regressors built beforehand "
+            "(untimed)")
     rows = {}
     if "numba_loop" in res:
         nb = res["numba_loop"]

@@ -92,6 +92,7 @@ def bench(quick: bool = False) -> dict:
         summary([wall * scale], [cpu * scale]), med, worst,
         "old baseline: plant rebuilt per point (with_params), python-control ss/c2d/"
         "feedback/poles; one run on the sample, extrapolated")
+    parts = _where_time_goes(plant, xa, ya, repeats=2 if quick else 3)
     return {"benchmark": "sweep", **stats["ours"], "error": err,
             "error_note": "largest |rho| difference from the model-built-once loop (-)",
             "points": n * n, "points_per_s": n * n / med, "first_run_s": first,
@@ -102,6 +103,12 @@ def bench(quick: bool = False) -> dict:
             "single_process": {**single, "points_per_s": n * n / single["median_s"],
                                "error": float(np.max(np.abs(res["single"].rho - m.rho))),
                                "note": "the map with workers=1 (this process, one core)"},
+            "single_process_parts_cpu_s": parts,
+            "parts_note": "the map in one process split into the kernel's steps (CPU "
+                          "medians over repeats): 'eigenvalues only' is what the batched "
+                          "baseline computes instead of the map's visible-mode test "
+                          "(eigenvectors, their inverse, the weights), so the difference "
+                          "is the cost of that exactness",
             "target": ">= 20000 points/s", "machine": machine()}
 
 
@@ -126,3 +133,60 @@ def _python_control_loop(plant, ctrl, xa, ya, iy, ix, rho):
             worst = max(worst, abs(float(np.max(np.abs(poles))) - float(rho[jy, jx])))
     wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
     return wall, cpu, worst
+
+
+def _where_time_goes(plant, xa, ya, repeats: int = 3) -> dict:
+    """CPU seconds of each step of the map in this process (medians over ``repeats``),
+    on the map's own blocks; ``eigenvalues only`` is timed on the same closed loops."""
+    from ..identify.valve import serial_blas
+    from ..stability import kernel, maps
+    from ..stability.parallel import sweeper_for
+    ctrl = maps._controller_spec(plant, None)
+    pos = plant.stroke / 2
+    spec = (plant.params.to_dict(), plant.friction, pos, ctrl, 0,
+            len(xa) * len(ya) >= maps._COMPILE_ABOVE)
+    sw = sweeper_for(spec)
+    flat, P, positions, gains, T, k0 = maps._point_inputs(sw, xa, ya, ctrl, pos)
+    tasks = maps._blocks(positions, P, gains, T, k0, 2500)
+    runs: dict[str, list[float]] = {}
+    with serial_blas():
+        for _ in range(repeats):
+            acc: dict[str, float] = {}
+            for t in tasks:
+                _block_parts(sw, kernel, t, acc)
+            c = time.process_time()
+            maps._boundaries(sw, xa, ya, flat, P, positions, gains, T, k0, 40)
+            acc["boundaries (40 x 40 coarse grid)"] = time.process_time() - c
+            for k, v in acc.items():
+                runs.setdefault(k, []).append(v)
+    return {k: float(np.median(v)) for k, v in runs.items()}
+
+
+def _block_parts(sw, kernel, t: dict, acc: dict) -> None:
+    """One block through the kernel's steps, adding each step's CPU time to ``acc``."""
+    def lap(name, c):
+        now = time.process_time()
+        acc[name] = acc.get(name, 0.0) + now - c
+        return now
+    c = time.process_time()
+    first, inv = kernel._unique_rows(np.column_stack([t["positions"], t["P"].T]))
+    c = lap("distinct points", c)
+    _, u, _, A, B, _ = sw.points(t["positions"][first], t["P"][:, first])
+    c = lap("equilibrium and tangent (compiled)", c)
+    A, B = A[inv], B[inv]
+    S = sw.state_scale
+    As, Bs = A * S[None, None, :] / S[None, :, None], B / S[None, :, None] * sw.u_scale
+    sw._velocity_gain(As, Bs)
+    c = lap("scaling and Kv", c)
+    n, N, Ts = sw.n, len(inv), t["T"]
+    M = np.zeros((N, n + 1, n + 1))
+    M[:, :n, :n], M[:, :n, n:] = As * Ts[:, None, None], Bs * Ts[:, None, None]
+    E = kernel.expm_batched(M)
+    c = lap("ZOH (batched expm)", c)
+    Acl, Br = kernel._closed_loop(E[:, :n, :n], E[:, :n, n], t["kp"], t["kd"], t["ki"], Ts,
+                                  S[0], sw.u_scale, sw.delay)
+    c = lap("closed loop", c)
+    kernel._visible_radius(Acl.copy(), Br)
+    c = lap("eigenvalues and the visible-mode test", c)
+    np.abs(np.linalg.eigvals(Acl)).max(axis=1)
+    lap("(eigenvalues only, for comparison)", c)

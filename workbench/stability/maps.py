@@ -12,9 +12,9 @@ Ts = T/2 + 1/w0, with w0, zeta and Kv of the dominant mode pair of the tangent
 model at each point.
 
 Speed comes from doing all points of a block in one call: the equilibria by a
-fixed Gauss-Newton iteration and the Jacobians in one compiled CasADi function
-mapped over the block, the discretisation (batched Pade expm) and eigenvalues in
-batched NumPy (:mod:`.kernel`). Blocks run on all local cores (forked worker
+fixed Gauss-Newton iteration and the Jacobians there in one compiled CasADi function
+mapped over the block (zero-copy into NumPy), the discretisation (batched Pade expm)
+and eigenvalues in batched NumPy (:mod:`.kernel`). Blocks run on all local cores (forked worker
 processes) or on a Dask cluster (``scheduler="tcp://..."``; :mod:`.parallel`).
 The axes are in :mod:`.axes`; this module holds the result and the driver.
 
@@ -300,9 +300,10 @@ def _boundaries(sweeper, x, y, flat, P, positions, gains, T, k0, npts):
     ix = np.unique(np.linspace(0, nx - 1, min(nx, npts)).round().astype(int))
     iy = np.unique(np.linspace(0, ny - 1, min(ny, npts)).round().astype(int))
     idx = (iy[:, None] * nx + ix[None, :]).ravel()
-    st, u, res, _ = sweeper.equilibria(positions[idx], P[:, idx])
+    _, _, res, A, B, _ = sweeper.points(positions[idx], P[:, idx])
     ok = np.isfinite(res)
-    w0, zeta, kv = sweeper.dominant(np.where(ok[:, None], st, 0.0), np.where(ok, u, 0.0), P[:, idx])
+    A[~ok], B[~ok] = 0.0, 0.0
+    w0, zeta, kv = sweeper.dominant_of(A, B)
     Ts = T[idx] / 2 + 1.0 / w0
     kk0 = k0[idx] if k0 is not None else gains["kp"][idx] * kv
     shape = (len(iy), len(ix))

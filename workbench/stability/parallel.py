@@ -85,8 +85,7 @@ def _run_forked(spec, tasks, nproc, bar):
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
     ctx = mp.get_context("fork")
-    sweeper_for(spec)._fun("eq", max(len(t["kp"]) for t in tasks))   # compile before fork
-    sweeper_for(spec)._fun("jac", max(len(t["kp"]) for t in tasks))
+    sweeper_for(spec)._fun("point")                        # compile before the fork
     results: list = [None] * len(tasks)
     with ProcessPoolExecutor(max_workers=min(nproc, len(tasks)), mp_context=ctx) as ex:
         futs = {ex.submit(evaluate_block, spec, t): i for i, t in enumerate(tasks)}

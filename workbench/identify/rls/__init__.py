@@ -58,16 +58,19 @@ the estimate, not its lag behind a parameter that is moving.
 
 Speed
 -----
-The per-sample step is one CasADi ``SX`` function; ``mapaccum`` turns it into a loop
-over chunks of samples that :func:`workbench._jit.compiled` compiles to C (cached), and
-chunks are evaluated through CasADi's zero-copy function buffer directly on the numpy
-arrays. Without a C compiler the same function runs on CasADi's virtual machine. A
-plain numpy per-sample loop of the same arithmetic (``method="numpy"``) is the baseline
-of ``workbench bench rls`` (:mod:`workbench.bench.rls`) and the independent check of the
-compiled path.
+The recursion runs as a plain C loop (:mod:`.ckernel`): the number of parameters fixed
+at build time, the regressors formed in the loop from ``y`` and ``u``, the covariance
+update on the upper triangle, the tracks written straight into the result's arrays;
+built by :func:`workbench.integrate.jit.shared_library` once per number of parameters
+and cached on disk. Without a C compiler the per-sample step is one CasADi ``SX``
+function that ``mapaccum`` turns into a loop over chunks of samples
+(``method="casadi"``, on CasADi's virtual machine there). A plain numpy per-sample loop
+of the same arithmetic (``method="numpy"``) is the independent check of both and the
+accuracy reference of ``workbench bench rls`` (:mod:`workbench.bench.rls`), whose
+baseline is the same recursion as a numba-compiled scalar loop.
 
 Modules: :mod:`.estimator` (:func:`rls`, :class:`RlsResult`), :mod:`.kernels` (the
-recursion, numpy and CasADi loops), :mod:`.forgetting` (:func:`choose_forgetting`),
+recursion, numpy and CasADi loops), :mod:`.ckernel` (the C loop), :mod:`.forgetting` (:func:`choose_forgetting`),
 :mod:`.report` (the Markdown report), :mod:`.simulate` (the model's simulated output: open
 loop, in the experiment's loop, or integrated from a velocity model). Command line: :mod:`workbench.cli.identify`.
 

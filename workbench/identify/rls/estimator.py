@@ -10,6 +10,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...params import json_safe
+from .ckernel import c_kernel, run_c
 from .kernels import _final_covariance, _pack, _run_casadi, _run_numpy
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -18,10 +19,13 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["RlsResult", "rls", "regressors", "parameter_names"]
 
 _P0_RELATIVE = 1e4                # p0="auto": P(0)_ii = 1e4 / mean(phi_i^2)
-_METHODS = ("auto", "casadi", "numpy")
+_METHODS = ("auto", "c", "casadi", "numpy")
 
 
 def _frozen_array(a: Any) -> np.ndarray:
+    if (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.base is None
+            and not a.flags.writeable):
+        return a            # already frozen and owning its data (rls's fresh outputs)
     arr = np.array(a, dtype=float, copy=True)
     arr.flags.writeable = False
     return arr
@@ -69,8 +73,8 @@ class RlsResult:
     start_index : int
         Index in the record of the first estimate.
     method : str
-        ``"compiled"`` (C via CasADi), ``"casadi"`` (CasADi virtual machine) or
-        ``"numpy"``.
+        ``"c"`` (the plain C loop, :mod:`.ckernel`), ``"compiled"`` (CasADi's
+        loop compiled to C), ``"casadi"`` (CasADi virtual machine) or ``"numpy"``.
     """
 
     time: np.ndarray
@@ -340,9 +344,12 @@ def regressors(y: Any, u: Any, orders: Sequence[int]) -> tuple[np.ndarray, np.nd
     u = np.asarray(u, dtype=float)
     k0 = _start_index((na, nb, nk))
     n = y.size
-    cols = [-y[k0 - i:n - i] for i in range(1, na + 1)]
-    cols += [u[k0 - nk - j:n - nk - j] for j in range(nb)]
-    return np.column_stack(cols), y[k0:].copy(), k0
+    phi = np.empty((n - k0, na + nb))
+    for i in range(1, na + 1):
+        np.negative(y[k0 - i:n - i], out=phi[:, i - 1])
+    for j in range(nb):
+        phi[:, na + j] = u[k0 - nk - j:n - nk - j]
+    return phi, y[k0:].copy(), k0
 
 
 def default_burn_in(n_estimates: int, npar: int) -> int:
@@ -386,13 +393,16 @@ def rls(y: Any, u: Any, orders: Sequence[int], forgetting: float = 0.99,
     p_max : float, optional
         Bound on ``trace(P)`` against wind-up (module notes); default
         ``trace(P(0)) / forgetting``; ``numpy.inf`` switches it off.
-    method : {"auto", "casadi", "numpy"}
-        ``"casadi"``: the CasADi loop (C when a compiler is present; refused above 16
-        parameters, whose symbolic step takes minutes to compile); ``"numpy"``: the
-        plain per-sample numpy loop (reference); ``"auto"``: CasADi up to 8 parameters,
-        beyond that whichever the cost model says is faster for the record length.
+    method : {"auto", "c", "casadi", "numpy"}
+        ``"c"``: the plain C loop (:mod:`.ckernel`; needs a C compiler, built once per
+        number of parameters and cached); ``"casadi"``: the CasADi loop (C when a
+        compiler is present; refused above 16 parameters, whose symbolic step takes
+        minutes to compile); ``"numpy"``: the plain per-sample numpy loop (reference);
+        ``"auto"``: the C loop when a compiler is present, else the CasADi virtual
+        machine up to 8 parameters and beyond that whichever the cost model says is
+        faster for the record length.
     progress : bool
-        Show a progress bar (CasADi loop only; costs nothing measurable).
+        Show a progress bar (C and CasADi loops; costs nothing measurable).
 
     Returns
     -------
@@ -433,22 +443,42 @@ def rls(y: Any, u: Any, orders: Sequence[int], forgetting: float = 0.99,
     npar = na + nb
     names = parameter_names(orders)
     th0 = _initial_estimate(theta0, names)
-    phi, target, k0 = regressors(yarr, uarr, orders)
-    p0_arr = _initial_covariance(p0, phi, npar)
+    k0 = _start_index(orders)
+    p0_arr = _initial_covariance(p0, yarr, uarr, orders)
     pm = _trace_bound(p_max, p0_arr, lam)
     x0 = _pack(th0, np.diag(p0_arr), np.zeros((npar, npar)), 0.0, 0.0)
-    if _choose_method(method, npar, target.size) == "numpy":
-        out, xf = _run_numpy(phi, target, x0, lam, pm)
-        kind = "numpy"
-    else:
-        out, xf, kind = _run_casadi(phi, target, x0, lam, pm, progress=progress)
+    tracks, xf, kind = _run(_choose_method(method, npar, yarr.size - k0), yarr, uarr,
+                            orders, x0, lam, pm, progress)
     tt, sample_time = _time_axis(tarr, sample_time, k0, yarr.size)
-    n = npar
-    return RlsResult(time=tt, theta=out[:, :n], std=out[:, n:2 * n], errors=out[:, 2 * n],
-                     effective_forgetting=out[:, 2 * n + 1], noise_variance=out[:, 2 * n + 2],
-                     covariance=_final_covariance(xf, n), names=names, orders=orders,
-                     forgetting=lam, p0=tuple(float(v) for v in p0_arr), p_max=pm, sample_time=sample_time,
-                     start_index=k0, method=kind)
+    return RlsResult(time=tt, **tracks, covariance=_final_covariance(xf, npar), names=names,
+                     orders=orders, forgetting=lam, p0=tuple(float(v) for v in p0_arr),
+                     p_max=pm, sample_time=sample_time, start_index=k0, method=kind)
+
+
+def _run(method: str, y: np.ndarray, u: np.ndarray, orders: tuple[int, int, int],
+         x0: np.ndarray, lam: float, pm: float,
+         progress: bool) -> tuple[dict[str, np.ndarray], np.ndarray, str]:
+    """The tracks (fresh read-only arrays by name), the final packed state and the kind
+    of loop that ran."""
+    n = orders[0] + orders[1]
+    if method == "c":
+        tracks, xf = run_c(c_kernel(n), y, u, orders, _start_index(orders), x0, lam, pm,
+                           progress=progress)
+        kind = "c"
+    else:
+        phi, target, _ = regressors(y, u, orders)
+        if method == "numpy":
+            out, xf = _run_numpy(phi, target, x0, lam, pm)
+            kind = "numpy"
+        else:
+            out, xf, kind = _run_casadi(phi, target, x0, lam, pm, progress=progress)
+        tracks = {"theta": out[:, :n], "std": out[:, n:2 * n], "errors": out[:, 2 * n],
+                  "effective_forgetting": out[:, 2 * n + 1],
+                  "noise_variance": out[:, 2 * n + 2]}
+        tracks = {k: np.ascontiguousarray(v) for k, v in tracks.items()}
+    for v in tracks.values():
+        v.flags.writeable = False
+    return tracks, xf, kind
 
 
 #: Cost model of the two loops (measured: 2 cores, gcc -O2): the numpy loop takes about
@@ -463,8 +493,16 @@ _CASADI_MAX_PARAMETERS = 16
 
 
 def _choose_method(method: str, npar: int, nsamples: int) -> str:
-    """``"numpy"`` or ``"casadi"``: ``"auto"`` keeps the compiled loop up to 8 parameters
-    and beyond that takes whichever the cost model says is faster for this record."""
+    """``"c"``, ``"numpy"`` or ``"casadi"``: ``"auto"`` takes the C loop when it can be
+    built; without a compiler it keeps CasADi's loop up to 8 parameters and beyond that
+    whichever the cost model says is faster for this record."""
+    if method in ("auto", "c") and c_kernel(npar) is not None:
+        return "c"
+    if method == "c":
+        from .ckernel import MAX_PARAMETERS
+        why = (f"takes at most {MAX_PARAMETERS} parameters, not {npar}"
+               if npar > MAX_PARAMETERS else "needs a C compiler (none found: set CC)")
+        raise InputError(f"method='c' {why}; use method='auto', 'casadi' or 'numpy'")
     compile_s = _COMPILE_SECONDS_AT_8 * (npar / 8.0) ** 3
     if method == "casadi" and npar > _CASADI_MAX_PARAMETERS:
         raise InputError(f"method='casadi' with {npar} parameters would spend about "
@@ -491,11 +529,15 @@ def _initial_estimate(theta0: Any, names: tuple[str, ...]) -> np.ndarray:
     return th0
 
 
-def _initial_covariance(p0: Any, phi: np.ndarray, npar: int) -> np.ndarray:
-    """The diagonal of P(0): ``p0`` (one number or ``npar``) or "auto" from the regressor power."""
+def _initial_covariance(p0: Any, y: np.ndarray, u: np.ndarray,
+                        orders: tuple[int, int, int]) -> np.ndarray:
+    """The diagonal of P(0): ``p0`` (one number or ``npar``) or "auto" from the regressor
+    power (of :func:`regressors` on ``y``, ``u``)."""
+    npar = orders[0] + orders[1]
     if isinstance(p0, str):
         if p0 != "auto":
             raise InputError(f"p0 must be a positive number or 'auto', got '{p0}'")
+        phi = regressors(y, u, orders)[0]
         power = np.mean(phi * phi, axis=0)
         p0_arr = np.where(power > 0, _P0_RELATIVE / np.where(power > 0, power, 1.0),
                           _P0_RELATIVE)
@@ -533,7 +575,8 @@ def _time_axis(tarr: np.ndarray | None, sample_time: float | None, k0: int,
         if sample_time is None:
             sample_time = float(np.median(np.diff(tarr)))
     elif sample_time is not None:
-        tt = np.arange(k0, n) * sample_time
+        tt = np.arange(k0, n, dtype=float)
+        tt *= sample_time
     else:
         tt = np.arange(k0, n, dtype=float)
     return tt, sample_time
