@@ -10,6 +10,7 @@ import dataclasses
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from workbench import Plant
@@ -184,3 +185,56 @@ def test_compensated_hold_needs_the_valve_map_and_holds_the_laws_estimate():
     # the law's estimate held at zero (it would be 40 after 40 updates) and told the
     # opening it applied
     assert st[0].d == 0.0 and us[-1] == pytest.approx(dead(5.0 + 5.0 * st[0].u_prev))
+
+
+class _Law:
+    """A law that always asks for 7 V (the hold's commands are the others)."""
+
+    sample_time = 0.002
+
+    def reset(self):
+        return 0
+
+    def update(self, state, r, y):
+        return state + 1, 7.0
+
+
+def test_a_reference_beyond_the_usable_stroke_is_held_at_its_end():
+    # the NMPC stops at its stroke margin (10 mm): a reference beyond it is held there
+    dead = DeadbandInverse(center=5.0, span=5.0, deadband=0.02)
+    hi = 0.49
+    raw = Compensated(_Law(), deadband=dead, hold=_hold())
+    clip = Compensated(_Law(), deadband=dead, hold=_hold(), limits=(0.01, hi))
+    for c in (raw, clip):
+        st = c.reset()
+        us = []
+        for _ in range(30):                          # piston still at the margin
+            st, u = c.update(st, 0.5, _y(hi))
+            us.append(u)
+        if c is raw:                                 # 10 mm off: never the hold's
+            assert all(u == pytest.approx(dead(7.0)) for u in us)
+        else:                                        # in the clipped target's bin: locked
+            assert us[-1] == dead.null and st[3]["mode"] == "locked"
+
+
+def test_a_preview_leaving_the_quantum_within_the_lead_releases_the_hold():
+    from workbench import references
+    from workbench.references import smooth
+    dead = DeadbandInverse(center=5.0, span=5.0, deadband=0.02)
+    # held at 0.25 until 0.2 s, then a 10 mm step, smoothed
+    p = references.profile([(0, 0.25), (0.2, 0.25), (0.2, 0.26), (0.6, 0.26)])
+    pv = smooth(references.Reference(p.times, p.values), 0.1, 5.0, 500.0)
+    t_move = next(t for t in np.arange(0, 0.6, 1e-4) if abs(pv.derivatives(t)[0] - 0.25) > 0.5 * Q)
+    lead = 0.04                                       # released before the raw step
+    c = Compensated(_Law(), deadband=dead, hold=_hold(), preview=pv, lead=lead)
+    st = c.reset()
+    first_law = None
+    for k in range(100):
+        t = k * 0.002
+        st, u = c.update(st, float(p(t)), _y(0.25))
+        if t > 0.05 and u == pytest.approx(dead(7.0)) and first_law is None:
+            first_law = t
+    # locked first (piston in the bin), released one lead before the preview leaves it,
+    # to the sample
+    assert first_law == pytest.approx(math.ceil((t_move - lead) / 0.002) * 0.002, abs=1.01 * 0.002)
+    assert c.leaving(0.0, 0.25) is False and c.leaving(t_move - 0.5 * lead, 0.25) is True

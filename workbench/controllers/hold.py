@@ -177,16 +177,19 @@ class HoldPositioner:
         w = int(math.ceil(self.width * strength - 1e-9))
         return w, min(1.0, self.width * strength / w)
 
-    def step(self, s: dict, r: float, y: dict) -> tuple[dict, float | None]:
+    def step(self, s: dict, r: float, y: dict,
+             release: bool = False) -> tuple[dict, float | None]:
         """Next state and the valve opening to command, or None: the position law's.
 
         ``r`` m reference; ``y``: ``x_measured`` (else ``x``) m, ``v`` m/s (estimated),
-        ``p_a``, ``p_b`` Pa (the net force the hold keeps at zero).
+        ``p_a``, ``p_b`` Pa (the net force the hold keeps at zero); ``release``: the
+        reference is about to move (a preview says so): the law's, as for a moving
+        reference.
         """
         s = dict(s)
         q = self.quantum
         x_m = float(y.get("x_measured", y["x"]))
-        moved_ref = s["r"] is None or abs(r - s["r"]) > 1e-12
+        moved_ref = s["r"] is None or abs(r - s["r"]) > 1e-12 or bool(release)
         s["still"] = s["still"] + 1 if s["x"] is not None and abs(x_m - s["x"]) < 0.5 * q else 0
         s["r"], s["x"] = r, x_m
         f = self.force(float(y["p_a"]), float(y["p_b"])) if self.force_rate > 0 else 0.0
