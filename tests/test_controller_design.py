@@ -262,3 +262,15 @@ def test_pid_integral_only_on_a_still_reference_near_its_target_and_clamped():
     for _ in range(5000):                            # clamped at integral_limit / ki
         st, u = pid.update(st, 0.26, {"x": 0.25, "v": 0.0})
     assert 10.0 * st[0] == pytest.approx(0.1, rel=1e-12)
+
+
+def test_the_hold_takes_over_where_the_pid_cannot_move_a_stuck_piston():
+    # the deadband inverse's straight piece leaves a residual overlap of width x d of
+    # the span (0.1 x 2 % x 5 V = 10 mV): a P law with kp V/m opens the valve only
+    # beyond 10 mV / kp; the hold must reach at least that far (on the precision rig
+    # the PID stuck 2.1-2.5 mm off, beyond a 2 mm hold range)
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    pid = design(plant, "pid", jit=False)
+    zone = 0.1 * 0.02 * 5.0 / pid.inner.inner.kp
+    assert zone > 2e-3 and pid.inner.hold.range == pytest.approx(2 * zone, rel=1e-12)
+    assert design(plant, "fl", jit=False).inner.hold.range == 2e-3

@@ -238,3 +238,19 @@ def test_a_preview_leaving_the_quantum_within_the_lead_releases_the_hold():
     # to the sample
     assert first_law == pytest.approx(math.ceil((t_move - lead) / 0.002) * 0.002, abs=1.01 * 0.002)
     assert c.leaving(0.0, 0.25) is False and c.leaving(t_move - 0.5 * lead, 0.25) is True
+
+
+def test_a_pulse_that_covers_under_half_the_distance_is_followed_by_a_stronger_one():
+    # a piston 7 quanta short that a pulse moves one quantum: walked in one quantum per
+    # pulse it took 7 pulses, into the hold's second half (issue 14's limit-cycle check)
+    h = _hold()
+    r = 0.25 + 7 * Q
+    s, out = _run(h, h.reset(), r, [_y(0.25)] * 20)          # dwell, then the first pulse
+    assert s["mode"] in ("pulse", "settle") and max(out[:20], key=lambda u: u or 0) == 0.2
+    s, out = _run(h, s, r, [_y(0.25 + Q)] * 20)               # it moved one quantum
+    assert s["lo+"] == pytest.approx(0.2) and max(out) == pytest.approx(0.2 * 1.5)
+    # one that covers half the distance or more keeps the strength (bracket unchanged)
+    h2 = _hold()
+    s, _ = _run(h2, h2.reset(), 0.25 + 4 * Q, [_y(0.25)] * 20)
+    s, out = _run(h2, s, 0.25 + 4 * Q, [_y(0.25 + 2 * Q)] * 20)
+    assert s.get("lo+", 0.0) == 0.0 and max(out) == pytest.approx(0.2)

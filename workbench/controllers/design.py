@@ -245,14 +245,31 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
     if lock is None:
         lock = "dry_friction" in has              # only friction holds a locked piston
     band = min(0.5 * q, 0.5 * ss_limit) if lock else 0.0
-    hold = (hold_for_plant(plant, T, 2.0 * band, pressure_noise, lock_speed=LOCK_SPEED)
-            if lock else None)
+    hold = (hold_for_plant(plant, T, 2.0 * band, pressure_noise, lock_speed=LOCK_SPEED,
+                           range=hold_range(law, dead)) if lock else None)
     margin = float(getattr(law, "stroke_margin", 0.0))
     comp = Compensated(law, deadband=dead, lock_band=band, release_band=4.0 * band,
                        lock_speed=LOCK_SPEED if lock else 0.0, hold=hold,
                        limits=(margin, plant.stroke - margin), preview=preview,
                        lead=release_lead(law, hold, T))
     return Observed(comp, obs, plant, preview=preview)
+
+
+def hold_range(law, dead) -> float:
+    """|r - x| (m) up to which the hold takes a stuck piston over: 2 mm, or twice the
+    position law's own dead zone if that is wider.
+
+    A proportional law whose error opens the valve less than the deadband inverse's
+    residual overlap (its straight piece, ``dead.width`` of the deadband) cannot move
+    a stuck piston; for the PID that is |e| < width d span / kp (0.2 % of the span
+    at kp = 4.4 V/m: 2.3 mm on the precision rig, where the piston stuck 2.1-2.5 mm
+    off, beyond the 2 mm the hold took over, for the rest of the hold while the
+    integral crept up by 0.01 V/s).
+    """
+    kp = getattr(law, "kp", None)
+    residual = dead.width * dead.deadband * dead.span
+    zone = residual / kp if kp else 0.0
+    return max(2e-3, 2.0 * zone)
 
 
 def release_lead(law, hold, T: float) -> float:

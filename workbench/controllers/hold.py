@@ -270,7 +270,11 @@ class HoldPositioner:
         a visible quantum, ``hi`` the weakest that carried it past the target's bin;
         the next pulse is their geometric mean (bisection), x ``grow`` above ``lo``
         without a ``hi`` yet, x ``shrink`` below ``hi`` without a ``lo``. A move
-        towards the target that stopped short keeps the strength.
+        towards the target that stopped short keeps the strength if it covered at
+        least half the distance (the next one starts nearer); one that covered less
+        counts as too weak (``lo``): kept, a piston stuck 7 quanta short was walked in
+        one quantum per pulse, 80 ms apart, into the hold's second half (FL, precision
+        profile --quick, hold after the 0.5 s step: 40 command changes there).
         """
         key = "lo+" if s["dir"] > 0 else "lo-"
         lo, hi = s.get(key, 0.0), s.get("hi" + key[2], math.inf)
@@ -282,6 +286,8 @@ class HoldPositioner:
             hi = min(hi, a)
         else:                                             # closer: not counted as a try
             s["tries"] = max(0, s.get("tries", 0) - 1)
+            if moved < abs(e) / self.quantum:             # not half way: too weak
+                lo = max(lo, a)
         if lo >= hi:                                      # outcomes scatter: reopen
             lo, hi = 0.8 * hi, 1.25 * lo
         s[key], s["hi" + key[2]] = lo, hi
