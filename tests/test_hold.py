@@ -254,3 +254,22 @@ def test_a_pulse_that_covers_under_half_the_distance_is_followed_by_a_stronger_o
     s, _ = _run(h2, h2.reset(), 0.25 + 4 * Q, [_y(0.25)] * 20)
     s, out = _run(h2, s, 0.25 + 4 * Q, [_y(0.25 + 2 * Q)] * 20)
     assert s.get("lo+", 0.0) == 0.0 and max(out) == pytest.approx(0.2)
+
+
+def test_pulses_and_unloading_scale_with_the_chambers_stiffness():
+    # the same opening changes the force of small chambers faster: sum of A / V over
+    # both chambers, relative to mid-stroke. Precision rig: 25 mm bore, 0.5 m stroke,
+    # dead volumes 5 cm^3 + 1 m of 4 mm line (12.57 cm^3) each
+    plant = Plant.from_toml(RIG)
+    h = hold_for_plant(plant, 0.002, Q, pressure_noise=300.0)
+    v0 = 5e-6 + math.pi / 4 * 0.004 ** 2 * 1.0
+
+    def k(x):
+        return 1 / (v0 + A * x) + 1 / (v0 + A * (0.5 - x))
+
+    assert h.rate_scale(0.25) == pytest.approx(1.0, rel=1e-12)
+    assert h.rate_scale(0.45) == pytest.approx(k(0.45) / k(0.25), rel=1e-9)
+    assert 1.9 < h.rate_scale(0.45) < 2.0 and h.rate_scale(0.05) == pytest.approx(h.rate_scale(0.45))
+    # a pulse of strength s opens s / scale there; mid-stroke it opens s
+    assert h.pulse_shape(0.3, 0.45)[1] == pytest.approx(0.3 / h.rate_scale(0.45), rel=1e-12)
+    assert h.pulse_shape(0.3, 0.25)[1] == pytest.approx(0.3, rel=1e-12)
