@@ -116,12 +116,11 @@ def _design(args, out: Path, done: list) -> int:
     with rp.step("comparison"):
         figs = {k: figures(e) for k, e in evs.items()}
         figs["nmpc (rig: friction 1.5x, mass +10 %)"] = figures(pert)
-        rows = [[k, f["steady_state_worst"] * 1e3, f["steady_state_median"] * 1e3,
-                 f["overshoot_pct"], f["sine_worst"] * 1e3, f["median_update_ms"],
+        rows = [[k, *_cells(f), _cell(f["median_update_ms"], 3),
                  "yes" if f["limit_cycle_free"] else "NO", "pass" if f["passed"] else "FAIL"]
                 for k, f in figs.items()]
-        rows.append(["published rig result", PUBLISHED["steady_state"] * 1e3, math.nan, math.nan,
-                     PUBLISHED["sine"] * 1e3, math.nan, "-", "-"])
+        rows.append(["published rig result", _cell(PUBLISHED["steady_state"] * 1e3, 3), "-", "-",
+                     _cell(PUBLISHED["sine"] * 1e3, 2), "-", "-", "-"])
         done.insert(1, rp.Section("Comparison", [
             rp.Paragraph("Worst and median steady-state error after the steps (mean |r - x| "
                          "over the last 0.5 s of each hold), largest overshoot, worst error on "
@@ -154,13 +153,24 @@ def _design(args, out: Path, done: list) -> int:
     return 0
 
 
+def _cell(x: float, decimals: int) -> str:
+    """A table cell with a fixed number of decimals (one format per column)."""
+    return "-" if not math.isfinite(x) else f"{x:.{decimals}f}"
+
+
+def _cells(f: dict) -> list[str]:
+    """Steady state worst and median (mm), overshoot (%), sine worst (mm) of
+    :func:`figures`, as table cells."""
+    return [_cell(f["steady_state_worst"] * 1e3, 3), _cell(f["steady_state_median"] * 1e3, 3),
+            _cell(f["overshoot_pct"], 1), _cell(f["sine_worst"] * 1e3, 2)]
+
+
 def _seed_section(seeds: dict) -> "rp.Section":
     """The NMPC's precision figures for each sensor-noise realisation."""
     rows = []
     for seed, ev in seeds.items():
         f = figures(ev)
-        rows.append([seed, f["steady_state_worst"] * 1e3, f["steady_state_median"] * 1e3,
-                     f["overshoot_pct"], f["sine_worst"] * 1e3,
+        rows.append([seed, *_cells(f),
                      "yes" if f["limit_cycle_free"] else "NO", "pass" if f["passed"] else "FAIL"])
     return rp.Section("NMPC: other sensor-noise realisations", [
         rp.Paragraph("The same NMPC on the same rig, with the position quantiser and the "

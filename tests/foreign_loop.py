@@ -101,10 +101,12 @@ def run(controller, rig: ForeignRig, reference, duration, *, seed=0, position_bi
     return LoopRun(t=t, **out)
 
 
-def holds(run_: LoopRun, quantum: float, min_duration=0.5, settle=0.5):
+def holds(run_: LoopRun, quantum: float, min_duration=0.5, settle=0.5, lead=0.0):
     """Per hold of the reference (r constant for at least ``min_duration`` s):
     steady-state error mean |r - x| over its last ``settle`` s (m), and over its second
-    half the position's peak-to-peak (m) and the command changes > 10 mV."""
+    half less its last ``lead`` s (the controller's hand-over to the next move, as in
+    workbench.controllers.evaluation.hold_evidence) the position's peak-to-peak (m)
+    and the command changes > 10 mV."""
     t, r = run_.t, run_.r
     edges = np.flatnonzero(np.abs(np.diff(r)) > 1e-12)
     starts = np.r_[0, edges + 1]
@@ -114,7 +116,7 @@ def holds(run_: LoopRun, quantum: float, min_duration=0.5, settle=0.5):
         if t[b] - t[a] < min_duration:
             continue
         last = (t >= t[b] - settle) & (t <= t[b])
-        half = (t >= 0.5 * (t[a] + t[b])) & (t <= t[b])
+        half = (t >= 0.5 * (t[a] + t[b])) & (t <= max(t[b] - lead, 0.5 * (t[a] + t[b])))
         xs, us = run_.x[half], run_.u[half]
         out.append({"start": float(t[a]), "end": float(t[b]), "target": float(r[a]),
                     "steady_state_error": float(np.mean(np.abs(r[last] - run_.x[last]))),

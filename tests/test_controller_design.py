@@ -240,3 +240,37 @@ def test_report_says_how_each_law_uses_the_friction_model():
     assert said["fl"].startswith("plant file's friction (Coulomb 15 N, static 25 N)")
     assert said["nmpc"] == "in the prediction model (smooth form)"
     assert said["pid"] == "none (integral action)"
+
+
+def test_pid_integral_only_on_a_still_reference_near_its_target_and_clamped():
+    # the 11 mm steady-state error of issue 14's PID: its integral wound up over a
+    # 250 mm step (-0.2 V) and held the piston short with the valve in the deadband
+    from workbench.controllers.design import VelocityPID
+    pid = VelocityPID(kp=4.0, kd=0.1, ki=10.0, sample_time=0.002, u_center=5.0, u_min=0.0,
+                      u_max=10.0, integral_band=6e-5, integral_zone=0.025, integral_limit=0.1)
+    st = pid.reset()
+    for k in range(50):                              # a moving reference: no integration
+        st, _ = pid.update(st, 0.25 - 0.005 * k, {"x": 0.25, "v": 0.0})
+    assert st[0] == 0.0
+    for _ in range(50):                              # still, 30 mm off: beyond the zone
+        st, _ = pid.update(st, 0.28, {"x": 0.25, "v": 0.0})
+    assert st[0] == 0.0
+    for _ in range(6):                # still (after its first sample), 10 mm off: e T each
+        st, u = pid.update(st, 0.26, {"x": 0.25, "v": 0.0})
+    assert st[0] == pytest.approx(5 * 0.01 * 0.002, rel=1e-12)
+    assert u == pytest.approx(5.0 + 4.0 * 0.01 + 10.0 * st[0], abs=1e-12)
+    for _ in range(5000):                            # clamped at integral_limit / ki
+        st, u = pid.update(st, 0.26, {"x": 0.25, "v": 0.0})
+    assert 10.0 * st[0] == pytest.approx(0.1, rel=1e-12)
+
+
+def test_the_hold_takes_over_where_the_pid_cannot_move_a_stuck_piston():
+    # the deadband inverse's straight piece leaves a residual overlap of width x d of
+    # the span (0.1 x 2 % x 5 V = 10 mV): a P law with kp V/m opens the valve only
+    # beyond 10 mV / kp; the hold must reach at least that far (on the precision rig
+    # the PID stuck 2.1-2.5 mm off, beyond a 2 mm hold range)
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    pid = design(plant, "pid", jit=False)
+    zone = 0.1 * 0.02 * 5.0 / pid.inner.inner.kp
+    assert zone > 2e-3 and pid.inner.hold.range == pytest.approx(2 * zone, rel=1e-12)
+    assert design(plant, "fl", jit=False).inner.hold.range == 2e-3

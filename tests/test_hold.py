@@ -10,6 +10,7 @@ import dataclasses
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from workbench import Plant
@@ -184,3 +185,91 @@ def test_compensated_hold_needs_the_valve_map_and_holds_the_laws_estimate():
     # the law's estimate held at zero (it would be 40 after 40 updates) and told the
     # opening it applied
     assert st[0].d == 0.0 and us[-1] == pytest.approx(dead(5.0 + 5.0 * st[0].u_prev))
+
+
+class _Law:
+    """A law that always asks for 7 V (the hold's commands are the others)."""
+
+    sample_time = 0.002
+
+    def reset(self):
+        return 0
+
+    def update(self, state, r, y):
+        return state + 1, 7.0
+
+
+def test_a_reference_beyond_the_usable_stroke_is_held_at_its_end():
+    # the NMPC stops at its stroke margin (10 mm): a reference beyond it is held there
+    dead = DeadbandInverse(center=5.0, span=5.0, deadband=0.02)
+    hi = 0.49
+    raw = Compensated(_Law(), deadband=dead, hold=_hold())
+    clip = Compensated(_Law(), deadband=dead, hold=_hold(), limits=(0.01, hi))
+    for c in (raw, clip):
+        st = c.reset()
+        us = []
+        for _ in range(30):                          # piston still at the margin
+            st, u = c.update(st, 0.5, _y(hi))
+            us.append(u)
+        if c is raw:                                 # 10 mm off: never the hold's
+            assert all(u == pytest.approx(dead(7.0)) for u in us)
+        else:                                        # in the clipped target's bin: locked
+            assert us[-1] == dead.null and st[3]["mode"] == "locked"
+
+
+def test_a_preview_leaving_the_quantum_within_the_lead_releases_the_hold():
+    from workbench import references
+    from workbench.references import smooth
+    dead = DeadbandInverse(center=5.0, span=5.0, deadband=0.02)
+    # held at 0.25 until 0.2 s, then a 10 mm step, smoothed
+    p = references.profile([(0, 0.25), (0.2, 0.25), (0.2, 0.26), (0.6, 0.26)])
+    pv = smooth(references.Reference(p.times, p.values), 0.1, 5.0, 500.0)
+    t_move = next(t for t in np.arange(0, 0.6, 1e-4) if abs(pv.derivatives(t)[0] - 0.25) > 0.5 * Q)
+    lead = 0.04                                       # released before the raw step
+    c = Compensated(_Law(), deadband=dead, hold=_hold(), preview=pv, lead=lead)
+    st = c.reset()
+    first_law = None
+    for k in range(100):
+        t = k * 0.002
+        st, u = c.update(st, float(p(t)), _y(0.25))
+        if t > 0.05 and u == pytest.approx(dead(7.0)) and first_law is None:
+            first_law = t
+    # locked first (piston in the bin), released one lead before the preview leaves it,
+    # to the sample
+    assert first_law == pytest.approx(math.ceil((t_move - lead) / 0.002) * 0.002, abs=1.01 * 0.002)
+    assert c.leaving(0.0, 0.25) is False and c.leaving(t_move - 0.5 * lead, 0.25) is True
+
+
+def test_a_pulse_that_covers_under_half_the_distance_is_followed_by_a_stronger_one():
+    # a piston 7 quanta short that a pulse moves one quantum: walked in one quantum per
+    # pulse it took 7 pulses, into the hold's second half (issue 14's limit-cycle check)
+    h = _hold()
+    r = 0.25 + 7 * Q
+    s, out = _run(h, h.reset(), r, [_y(0.25)] * 20)          # dwell, then the first pulse
+    assert s["mode"] in ("pulse", "settle") and max(out[:20], key=lambda u: u or 0) == 0.2
+    s, out = _run(h, s, r, [_y(0.25 + Q)] * 20)               # it moved one quantum
+    assert s["lo+"] == pytest.approx(0.2) and max(out) == pytest.approx(0.2 * 1.5)
+    # one that covers half the distance or more keeps the strength (bracket unchanged)
+    h2 = _hold()
+    s, _ = _run(h2, h2.reset(), 0.25 + 4 * Q, [_y(0.25)] * 20)
+    s, out = _run(h2, s, 0.25 + 4 * Q, [_y(0.25 + 2 * Q)] * 20)
+    assert s.get("lo+", 0.0) == 0.0 and max(out) == pytest.approx(0.2)
+
+
+def test_pulses_and_unloading_scale_with_the_chambers_stiffness():
+    # the same opening changes the force of small chambers faster: sum of A / V over
+    # both chambers, relative to mid-stroke. Precision rig: 25 mm bore, 0.5 m stroke,
+    # dead volumes 5 cm^3 + 1 m of 4 mm line (12.57 cm^3) each
+    plant = Plant.from_toml(RIG)
+    h = hold_for_plant(plant, 0.002, Q, pressure_noise=300.0)
+    v0 = 5e-6 + math.pi / 4 * 0.004 ** 2 * 1.0
+
+    def k(x):
+        return 1 / (v0 + A * x) + 1 / (v0 + A * (0.5 - x))
+
+    assert h.rate_scale(0.25) == pytest.approx(1.0, rel=1e-12)
+    assert h.rate_scale(0.45) == pytest.approx(k(0.45) / k(0.25), rel=1e-9)
+    assert 1.9 < h.rate_scale(0.45) < 2.0 and h.rate_scale(0.05) == pytest.approx(h.rate_scale(0.45))
+    # a pulse of strength s opens s / scale there; mid-stroke it opens s
+    assert h.pulse_shape(0.3, 0.45)[1] == pytest.approx(0.3 / h.rate_scale(0.45), rel=1e-12)
+    assert h.pulse_shape(0.3, 0.25)[1] == pytest.approx(0.3, rel=1e-12)

@@ -183,6 +183,16 @@ class Compensated:
     hold : :class:`~.hold.HoldPositioner` or None. When given, it replaces the lock
         above: locked on the target's quantum, a stuck piston pulsed in (see
         :mod:`workbench.controllers.hold`).
+    limits : (lo, hi) m or None: the stroke the law may use. The hold compares the
+        reference clipped to it: a reference beyond it is one the law stops short of
+        (the NMPC projects it onto its stroke margin), and a raw one beyond the
+        stroke was never in the piston's quantum, so the hold never engaged there.
+    preview : the reference known in advance (a :class:`~workbench.references.
+        Trajectory`, time from the first sample), or None. With it a hold is
+        released as soon as the preview leaves the held quantum within ``lead``:
+        the law then starts the move with the trajectory, not after it (a smoothed
+        step starts before the raw one; the NMPC plans a horizon ahead).
+    lead : s, how far ahead the preview is looked at (the law's horizon).
     """
 
     inner: Any
@@ -191,6 +201,9 @@ class Compensated:
     release_band: float = 0.0
     lock_speed: float = 0.0
     hold: Any = None
+    limits: Any = None
+    preview: Any = None
+    lead: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("lock_band", "release_band", "lock_speed"):
@@ -199,6 +212,12 @@ class Compensated:
                 raise InputError(f"{name} must be >= 0, got {v!r}")
         if self.release_band < self.lock_band:
             raise InputError("release_band must not be below lock_band")
+        if not (isinstance(self.lead, (int, float)) and math.isfinite(self.lead)
+                and self.lead >= 0):
+            raise InputError(f"lead must be >= 0 s, got {self.lead!r}")
+        if self.limits is not None and not (len(self.limits) == 2
+                                            and float(self.limits[0]) <= float(self.limits[1])):
+            raise InputError(f"limits must be (lo, hi) m with lo <= hi, got {self.limits!r}")
         if self.hold is not None and self.deadband is None:
             raise InputError("the hold's pulses need the valve's centre and span: give a "
                              "DeadbandInverse (DeadbandInverse.from_plant)")
@@ -213,16 +232,32 @@ class Compensated:
 
     def reset(self):
         return (self.inner.reset(), False, None,
-                None if self.hold is None else self.hold.reset(), None)
+                None if self.hold is None else self.hold.reset(), None, 0.0)
+
+    def leaving(self, t: float, r: float) -> bool:
+        """Whether the preview leaves the quantum of ``r`` (m, clipped) within
+        ``lead`` s of ``t`` (s): sampled at the controller's samples."""
+        if self.preview is None or self.hold is None:
+            return False
+        T = self.sample_time
+        n = int(math.floor(self.lead / T + 1e-9))
+        tt = t + T * np.arange(n + 1)
+        ahead = np.interp(tt, self.preview.table[:, 0], self.preview.table[:, 1])
+        if self.limits is not None:
+            ahead = np.clip(ahead, float(self.limits[0]), float(self.limits[1]))
+        return bool(np.any(np.abs(ahead - r) > 0.5 * self.hold.quantum))
 
     def update(self, state, r: float, y: dict):
-        inner_state, locked, r_prev, hold_state, entry = state
+        inner_state, locked, r_prev, hold_state, entry, t = (*state, 0.0)[:6]
         before = inner_state
         inner_state, u = self.inner.update(inner_state, r, y)   # keeps time and estimates
         if self.deadband is not None:
             u = self.deadband(u)
+        if self.limits is not None:
+            r = min(max(float(r), float(self.limits[0])), float(self.limits[1]))
         if self.hold is not None:
-            hold_state, opening = self.hold.step(hold_state, r, y)
+            hold_state, opening = self.hold.step(hold_state, r, y,
+                                                 release=self.leaving(t, r))
             if opening is None:
                 entry = None
             else:
@@ -238,7 +273,7 @@ class Compensated:
                 locked = still and e <= self.lock_band and abs(float(y["v"])) <= self.lock_speed
             if locked:
                 u = self.deadband.null if self.deadband is not None else _centre(self.inner)
-        return (inner_state, locked, r, hold_state, entry), float(u)
+        return (inner_state, locked, r, hold_state, entry, t + self.sample_time), float(u)
 
     def _opening(self, s: float) -> float:
         """Command (V) for the valve opening ``s`` (fraction of the span, deadband

@@ -60,6 +60,9 @@ LOCK_SPEED = 0.02
 #: Share of the valve's flow, the force range and the force rate that a planned
 #: trajectory may use; the rest is for the feedback (friction, lines, model error).
 TRAJECTORY_MARGIN = 0.3
+#: Share of the valve's span the PID's integral may command: a null offset or a
+#: leakage the plant file does not give (proportional valves: about 1-2 % of the span).
+INTEGRAL_SHARE = 0.02
 #: RHO0 kg/m^3 and T0 K of ISO 6358's standard reference atmosphere.
 _RHO0, _T0, _R = 1.185, 293.15, 287.0
 
@@ -109,13 +112,30 @@ def axis_limits(plant, margin: float = TRAJECTORY_MARGIN) -> AxisLimits:
 
 @dataclass(frozen=True)
 class VelocityPID:
-    """PID on the estimated state: u = u_c + kp e - kd (v - r') + ki int(e) (V).
+    """PID on the estimated state, with acceleration feedback and feedforward (V):
 
-    The derivative acts on the estimated velocity (observer) against the reference's
-    rate (from the preview, else the reference's difference), so neither a step nor a
-    quantised position kicks it. The integral is held while the command saturates and
-    while |e| is below ``integral_band`` (m; half a quantum: below it the sensor cannot
-    tell the error, and integrating noise into a stuck piston makes it hunt).
+        u = u_c + kp e + kd (r1 - v) + ka (r2 - a) + ff . (r1, r2, r3) + ki int(e)
+
+    e = r - x, with r the preview's trajectory when given (else the reference as it
+    comes, r1 its difference, r2 = r3 = 0 and no ``ff``; r1, r2, r3 the first three
+    derivatives);
+    x, v, a the observer's estimates (``a``: the pneumatic force less the observer's
+    force estimate, over the mass; ka = 0 in :func:`design`, see :func:`_pid`).
+    ``ff`` is the reduced model's inverse, so the loop works only on what the model
+    misses (without it a ramp lags by r1 / (kp kv): 9 mm at 100 mm/s on the precision
+    rig).
+
+    The integral is for what holds a piston off its target with the valve at its
+    null (an unmodelled null offset, leakage), a few per cent of the span at most:
+
+    * it integrates only while the reference is still and |e| <= ``integral_zone``
+      (m): on a move its error is the trajectory's, not an offset's (integrated over a
+      250 mm step it wound up to -0.2 V and held a piston 11 mm short of its target
+      with the valve closed in the deadband: precision rig);
+    * its contribution is clamped to +-``integral_limit`` (V);
+    * it is held while |e| is below ``integral_band`` (m; half a quantum: below it
+      the sensor cannot tell the error, and integrating noise into a stuck piston
+      makes it hunt) and while the command saturates.
     """
 
     kp: float
@@ -127,6 +147,10 @@ class VelocityPID:
     u_max: float
     integral_band: float = 0.0
     preview: Any = None
+    ka: float = 0.0
+    ff: tuple = (0.0, 0.0, 0.0)
+    integral_zone: float = math.inf
+    integral_limit: float = math.inf
 
     kind = "pid"
     needs = ("x", "v")
@@ -137,20 +161,28 @@ class VelocityPID:
     def held(self, new, entry, opening: float):
         """State while a hold commands the valve: the integral frozen at ``entry``'s
         (:func:`~.compensation.held`)."""
-        return (new[0] if entry is None else entry[0], new[1], new[2])
+        return (new[0] if entry is None else entry[0], *new[1:])
 
     def update(self, state, r: float, y: dict):
         integ, r_prev, t = state
         T = self.sample_time
+        ff = self.ff
         if self.preview is not None:
-            rate = float(self.preview.derivatives(t)[1])
+            rs, r1, r2, r3 = (float(d) for d in self.preview.derivatives(t))
         else:
-            rate = 0.0 if r_prev is None else (r - r_prev) / T
-        e = r - float(y["x"])
-        u = self.u_center + self.kp * e - self.kd * (float(y["v"]) - rate) + self.ki * integ
-        if abs(e) > self.integral_band:
-            new = integ + e * T
-            u_try = u + self.ki * e * T
+            # a step's difference is no velocity to feed forward (a 30 mm step at
+            # 10 ms asked for 3 m/s: 1.2 V for a sample, 3.8 mm overshoot)
+            rs, r1, r2, r3 = r, 0.0 if r_prev is None else (r - r_prev) / T, 0.0, 0.0
+            ff = (0.0, 0.0, 0.0)
+        e = rs - float(y["x"])
+        a = float(y.get("a", 0.0)) if self.ka else 0.0
+        u = (self.u_center + self.kp * e + self.kd * (r1 - float(y["v"])) + self.ka * (r2 - a)
+             + ff[0] * r1 + ff[1] * r2 + ff[2] * r3 + self.ki * integ)
+        still = r_prev is not None and abs(r - r_prev) <= 1e-12 and r1 == 0.0
+        if still and self.integral_band < abs(e) <= self.integral_zone:
+            cap = self.integral_limit / self.ki if self.ki > 0 else math.inf
+            new = min(max(integ + e * T, -cap), cap)
+            u_try = u + self.ki * (new - integ)
             if self.u_min < u_try < self.u_max:
                 integ, u = new, u_try
         return (integ, r, t + T), float(u)
@@ -213,11 +245,41 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
     if lock is None:
         lock = "dry_friction" in has              # only friction holds a locked piston
     band = min(0.5 * q, 0.5 * ss_limit) if lock else 0.0
-    hold = (hold_for_plant(plant, T, 2.0 * band, pressure_noise, lock_speed=LOCK_SPEED)
-            if lock else None)
+    hold = (hold_for_plant(plant, T, 2.0 * band, pressure_noise, lock_speed=LOCK_SPEED,
+                           range=hold_range(law, dead)) if lock else None)
+    margin = float(getattr(law, "stroke_margin", 0.0))
     comp = Compensated(law, deadband=dead, lock_band=band, release_band=4.0 * band,
-                       lock_speed=LOCK_SPEED if lock else 0.0, hold=hold)
+                       lock_speed=LOCK_SPEED if lock else 0.0, hold=hold,
+                       limits=(margin, plant.stroke - margin), preview=preview,
+                       lead=release_lead(law, hold, T))
     return Observed(comp, obs, plant, preview=preview)
+
+
+def hold_range(law, dead) -> float:
+    """|r - x| (m) up to which the hold takes a stuck piston over: 2 mm, or twice the
+    position law's own dead zone if that is wider.
+
+    A proportional law whose error opens the valve less than the deadband inverse's
+    residual overlap (its straight piece, ``dead.width`` of the deadband) cannot move
+    a stuck piston; for the PID that is |e| < width d span / kp (0.2 % of the span
+    at kp = 4.4 V/m: 2.3 mm on the precision rig, where the piston stuck 2.1-2.5 mm
+    off, beyond the 2 mm the hold took over, for the rest of the hold while the
+    integral crept up by 0.01 V/s).
+    """
+    kp = getattr(law, "kp", None)
+    residual = dead.width * dead.deadband * dead.span
+    zone = residual / kp if kp else 0.0
+    return max(2e-3, 2.0 * zone)
+
+
+def release_lead(law, hold, T: float) -> float:
+    """How far ahead (s) a hold looks at the preview to hand over before a move: the
+    NMPC's horizon (it plans the move that far ahead), else the lines' round trip
+    (the hold's pulse half, ``hold.width`` samples) and a sample: a command reaches
+    the chambers only after it."""
+    if getattr(law, "horizon", None) is not None:
+        return float(law.horizon) * T
+    return (getattr(hold, "width", 0) + 1) * T
 
 
 def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool,
@@ -233,8 +295,7 @@ def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool,
                               horizon=nmpc_horizon(T), jit=jit, preview=preview,
                               disturbance_gain=nmpc_disturbance_gain(T))
     if kind == "fl":
-        from .feedback_linearizing import SAMPLING_LIMIT
-        lam = bandwidth if bandwidth is not None else min(25.0, 0.8 * SAMPLING_LIMIT / T)
+        lam = bandwidth if bandwidth is not None else _fl_bandwidth(T)
         fl = _fl(plant, lam, T, preview)
         fr = FrictionModel.from_plant(plant)
         # handed over to the force estimate in the observer's time constant: no double
@@ -243,6 +304,9 @@ def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool,
         # Precision rig, FL sine worst error seeds 0/1: precision profile 13.3/13.2 ->
         # 9.1/13.4 mm, test profile 13.7/13.8 -> 11.3/9.9 mm; overshoot unchanged
         return replace(fl, friction=fr, friction_lag=estimate_lag) if fr is not None else fl
+    # no friction feedforward: FL's (the plant file's friction at the reference's
+    # velocity handed over to the observer's estimate) made this loop hunt in its holds
+    # (precision profile --quick: 300 command changes, 5 mm peak-to-peak)
     return _pid(plant, T, preview, q)
 
 
@@ -292,10 +356,18 @@ def _fl(plant, lam: float, T: float, preview):
 def _pid(plant, T: float, preview, q: float) -> VelocityPID:
     """PID gains from the reduced linear model at mid-stroke (paper 000's structure).
 
-    Loop gain k0 = kp Kv at a third of the continuous Hurwitz limit 2 zeta w0 and
+    Loop gain k0 = kp kv at a third of the continuous Hurwitz limit 2 zeta w0 and
     below 0.2 / T (the sampled loop's phase); kd puts the PD zero on the slower real
     pole for zeta > 1, else at w0 (it damps the pole pair); ki = k0 kp / 10 (the
-    integral an order slower than the loop).
+    integral an order slower than the loop), limited to ``INTEGRAL_SHARE`` of the
+    span. ff = (w0^2, 2 zeta w0, 1) / (kv w0^2) inverts the reduced model
+    x''' + 2 zeta w0 x'' + w0^2 x' = kv w0^2 u for the preview's derivatives.
+
+    Tried and not kept: the three poles placed at the FL's bandwidth with
+    acceleration feedback (ka, the PVA structure): precision profile --quick worst
+    steady state 1.87 mm vs 2.46 mm, but 68-81 command changes in four holds' second
+    halves (the pressure loop rings with the 1 m lines), and a 30 mm step at 10 ms
+    stuck 2.5 mm off (pole 25 rad/s; 6.7 mm at 20, 0.02 mm at 30: stick-slip).
     """
     from .. import linearize
     from .mpc import prediction_model
@@ -307,11 +379,22 @@ def _pid(plant, T: float, preview, q: float) -> VelocityPID:
                                                "line_dynamics", "supply_droop")])
     red = linearize.reduced_position_model(linearize.tangent(smooth, x=0.5 * plant.stroke))
     k0 = min(2.0 * red.zeta * red.w0 / 3.0, 0.2 / T)
-    kp = k0 / red.kv
+    kv, w2 = red.kv, red.w0 ** 2
+    kp = k0 / kv
     tau = ((red.zeta + math.sqrt(red.zeta ** 2 - 1.0)) / red.w0 if red.zeta > 1.0
            else 1.0 / red.w0)
+    limit = INTEGRAL_SHARE * float(prm["valve.command_span"])
     return VelocityPID(kp=kp, kd=kp * tau, ki=0.1 * k0 * kp, sample_time=T,
                        u_center=float(prm["valve.command_center"]),
                        u_min=float(prm["valve.command_min"]),
                        u_max=float(prm["valve.command_max"]),
-                       integral_band=0.5 * q, preview=preview)
+                       integral_band=0.5 * q, preview=preview,
+                       ff=(1.0 / kv, 2.0 * red.zeta / (red.w0 * kv), 1.0 / (kv * w2)),
+                       integral_zone=limit / kp, integral_limit=limit)
+
+
+def _fl_bandwidth(T: float) -> float:
+    """The FL's default error bandwidth at sample time ``T`` (rad/s): 25, at most
+    0.8 x its sampling limit."""
+    from .feedback_linearizing import SAMPLING_LIMIT
+    return min(25.0, 0.8 * SAMPLING_LIMIT / T)

@@ -259,7 +259,9 @@ class Observed:
         f = pneumatic_force(self.plant, p_a, p_b)
         est = (self.observer.start(x_m, f) if est is None
                else self.observer.step(est, x_m, f_prev, f))
-        yi = {"x": float(est[0]), "v": float(est[1]), "d": float(est[2]), "x_measured": x_m,
-              "p_a": p_a, "p_b": p_b}
+        ob = self.observer
+        acc = (f - ob.viscous * float(est[1]) - float(est[2])) / ob.mass
+        yi = {"x": float(est[0]), "v": float(est[1]), "d": float(est[2]), "a": acc,
+              "x_measured": x_m, "p_a": p_a, "p_b": p_b}
         inner_state, u = self.inner.update(inner_state, r, yi)
         return (est, f, inner_state), u
