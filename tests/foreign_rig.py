@@ -347,3 +347,110 @@ def record(plant_file, reference, duration, seed, pressures=True, supply=False, 
         cols["p_s"] = np.round((Z[:, 4] + rng.normal(0, 500.0, n)) / lsb_p) * lsb_p
     return Recording.from_arrays(t, u=U, x=X, r=np.asarray(reference(t), float),
                                  metadata=meta, **cols)
+
+
+def simulate_logged(plant_file, reference, duration, seed=0, overrides=None, friction=None,
+                    p0=(4.4e5, 4.4e5), rtol=1e-6, line_model="pi5", log_period=1e-3,
+                    jitter=0.0, open_loop=None):
+    """:func:`simulate` on a logger's own clock: samples every ``log_period`` s, each
+    instant moved by up to +-``jitter`` x ``log_period`` (uniform), while the
+    controller keeps its own period (the [controller] sample_time, exact). With
+    ``open_loop`` (a function t -> u, V) the command is that function held over 10 ms
+    instead of the PD loop.
+
+    Returns (t, Z, U, rng): log instants (s), true states (n, 5) as :func:`simulate`,
+    the command in force at each instant (V), and the generator for the sensor noise.
+    """
+    P = load_plant(plant_file, overrides)
+    rig = ForeignRig(P, **(friction or {}), line_model=line_model)
+    Ts = P["controller.sample_time"] if open_loop is None else 0.01
+    rng = np.random.default_rng(seed)
+    n = int(round(duration / log_period)) + 1
+    t = np.arange(n) * log_period
+    if jitter:
+        t[1:-1] += rng.uniform(-jitter, jitter, n - 2) * log_period
+    uc = P["valve.command_center"]
+    z = rig.initial(float(reference(0.0)), p0[0], p0[1], uc)
+    lsb_x = rig.L / 4096
+    atol = np.full(rig.n, 1e-2)
+    atol[:2] = 1e-9, 1e-7
+    if rig.lugre:
+        atol[rig.i_z] = 1e-10
+    if rig.heat is not None:
+        atol[rig.i_mass:rig.i_mass + 2] = 1e-12
+    if rig.lines:
+        nn = rig.nodes
+        for s in (nn, 3 * nn):
+            atol[rig.i_line + s:rig.i_line + s + nn] = 1e-9
+    Z = np.empty((n, 5))
+    U = np.empty(n)
+    Z[0] = *z[:4], (z[rig.i_ps] if rig.droop else P["supply.pressure"])
+    e_prev, k = None, 0
+    while k * Ts < t[-1] - 1e-12:
+        t0, t1 = k * Ts, min((k + 1) * Ts, t[-1])
+        if open_loop is None:
+            x_meas = round((z[0] + rng.normal(0, 20e-6)) / lsb_x) * lsb_x
+            e = float(reference(t0)) - x_meas
+            e_prev = e if e_prev is None else e_prev
+            u = uc + P["controller.kp"] * e + P["controller.kd"] * (e - e_prev) / Ts
+            e_prev = e
+        else:
+            u = float(open_loop(t0))
+        u = min(max(u, P["valve.command_min"]), P["valve.command_max"])
+        sel = np.flatnonzero((t > t0) & (t <= t1))
+        U[(t >= t0) & (t <= t1)] = u
+        te = t[sel] if len(sel) and t[sel[-1]] == t1 else np.append(t[sel], t1)
+        sol = solve_ivp(rig.rhs, (t0, t1), z, method="LSODA", args=(u,), rtol=rtol,
+                        atol=atol, t_eval=te)
+        Z[sel, :4] = sol.y[:4, :len(sel)].T
+        Z[sel, 4] = sol.y[rig.i_ps, :len(sel)] if rig.droop else P["supply.pressure"]
+        z = sol.y[:, -1]
+        k += 1
+    return t, Z, U, rng
+
+
+def log_csv(path, plant_file, t, Z, U, rng, reference=None, pressures=True, x_noise=20e-6,
+            p_noise=500.0, bits=12, colour=0.0, units="si", supply=False):
+    """Write a logger's CSV of :func:`simulate_logged`'s run.
+
+    Noise: Gaussian, or with ``colour`` in (0, 1) first-order coloured (AR(1) with that
+    pole, scaled to the same standard deviation); then ``bits`` quantisation (position
+    over the stroke, pressures over 0..1 MPa absolute). ``units``: "si" or "rig" (t in
+    ms, x and r in mm, pressures in gauge bar, declared in the header cells).
+    ``pressures``: True, False or "p_a"/"p_b". ``supply``: log p_s as well.
+    """
+    n = len(t)
+    L = load_plant(plant_file)["cylinder.stroke"]
+
+    def noise(sd):
+        w = rng.normal(0, sd, n)
+        if colour:
+            from scipy.signal import lfilter
+            w = lfilter([math.sqrt(1 - colour ** 2)], [1, -colour], w)
+        return w
+    lsb_x, lsb_p = L / 2 ** bits, 1e6 / 2 ** bits
+    cols = {"t": t, "u": U, "x": np.round((Z[:, 0] + noise(x_noise)) / lsb_x) * lsb_x}
+    if reference is not None:
+        cols["r"] = np.asarray(reference(t), float)
+    pa = np.round((Z[:, 2] + noise(p_noise)) / lsb_p) * lsb_p
+    pb = np.round((Z[:, 3] + noise(p_noise)) / lsb_p) * lsb_p
+    if pressures is True or pressures == "p_a":
+        cols["p_a"] = pa
+    if pressures is True or pressures == "p_b":
+        cols["p_b"] = pb
+    if supply:
+        cols["p_s"] = np.round((Z[:, 4] + noise(p_noise)) / lsb_p) * lsb_p
+    head, out = [], []
+    for name, y in cols.items():
+        if units == "rig" and name == "t":
+            head.append("t [ms]"); out.append(y * 1e3)
+        elif units == "rig" and name in ("x", "r"):
+            head.append(f"{name} [mm]"); out.append(y * 1e3)
+        elif units == "rig" and name.startswith("p_"):
+            head.append(f"{name} [bar_g]"); out.append((y - 101325.0) / 1e5)
+        else:
+            head.append(name); out.append(y)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write("# source: tests/foreign_rig.py\n" + ",".join(head) + "\n")
+        np.savetxt(fh, np.column_stack(out), delimiter=",", fmt="%.10g")
+    return path
