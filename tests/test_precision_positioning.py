@@ -87,8 +87,6 @@ def test_steady_state_within_one_quantum_after_every_step(nominal):
     assert max(h["steady_state_error"] for h in steps) <= q, [h["steady_state_error"] for h in steps]
 
 
-@pytest.mark.xfail(strict=True, reason="issue 14 open: 1.06 mm, the start of the sine from a "
-                   "hold whose net force is near zero (module docstring)")
 def test_worst_error_on_the_sine_at_most_1mm(nominal):
     assert nominal.validation.metrics.sine_error_max <= 1e-3
 
