@@ -6,9 +6,9 @@ On the precision rig (designs/plants/rigs/precision_rig25.toml: static friction 
 of 1 mm/s has the slope k = F_s / v_e = 2.5e4 N s/m at rest, k h / m = 10.4: far
 outside RK4's stability interval (2.785), so one interval multiplied a velocity
 difference at rest by ~1e10 and two closed loops whose measurements differ by 1e-9 m
-parted by volts within one sample. The width is now the sharpest that one RK4 step
-integrates accurately: half the Stribeck velocity, with as many substeps as that
-needs (mpc.model.friction_velocity).
+parted by volts within one sample. The width is now half the Stribeck velocity, and
+the substeps are raised until one RK4 step resolves the decay at rest, k h / m <= 1
+(mpc.model.friction_velocity: 5 mm/s and 9 substeps here).
 """
 
 from __future__ import annotations
