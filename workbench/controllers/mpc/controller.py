@@ -116,7 +116,7 @@ class NMPC:
     friction_width : float or None, m/s
         Tanh width v_e of the model's dry friction, F_str(v) tanh(v / v_e); None
         (default): half the Stribeck velocity, with the substeps raised so that RK4
-        integrates it accurately (:func:`.model.friction_velocity`; 5 mm/s and 9
+        integrates it accurately (:func:`.model.friction_velocity`; 5.25 mm/s and 8
         substeps on the 2 ms precision rig: the physics' 1 mm/s with 4 substeps made
         the prediction of a stuck piston a rounding artefact).
     compiled_sample : bool

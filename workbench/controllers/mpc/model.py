@@ -42,8 +42,10 @@ V_SCALE = 1.0
 #: of :func:`workbench.physics.friction.smooth_friction`'s default).
 MIN_FRICTION_VELOCITY = 1e-3
 #: Most RK4 substeps per interval :func:`friction_velocity` raises the NMPC's
-#: ``substeps`` to (4x the default: the interval map's cost grows with them).
-MAX_SUBSTEPS = 16
+#: ``substeps`` to: twice the default, as the interval map's cost grows with them
+#: (``workbench bench mpc``'s friction variant at 10 ms: 3.9x the 4-state model's
+#: time with 16, against its target of 3x).
+MAX_SUBSTEPS = 8
 
 
 def prediction_model(plant, effects: Sequence[str] | None = None):
@@ -185,7 +187,8 @@ def friction_velocity(model, sample_time: float, substeps: int,
       map's cost grows with them); beyond that the width is widened to
       F_s h / (m - beta h) instead.
 
-    Precision rig, 2 ms: v_e = 5 mm/s with 9 substeps. Below v_e the prediction's
+    Precision rig, 2 ms: 9 substeps would resolve v_s / 2 = 5 mm/s; with 8, v_e =
+    5.25 mm/s (at 10 ms: 27 mm/s). Below v_e the prediction's
     friction depends on the estimated velocity's sign no more than linearly, and the
     velocity decays within one substep, so the observer's velocity noise at rest
     (0.2 mm/s from 300 Pa pressure noise; up to K_v q / sqrt(12) = 12 mm/s while the
