@@ -32,6 +32,15 @@ perturbed rig (static friction 37.5 N: a pulse that breaks it away moves it 0.3-
 several quanta; hold 3 hunts in pulses, 51 command changes in its second half, and
 ends 1.1 mm off). Strict xfails record both.
 
+Session 8 (branch h14f): the hold hands over to the NMPC one horizon before the
+reference leaves its quantum (a preview), compares the reference clipped to the NMPC's
+stroke margin, and sizes its pulses for the chambers' stiffness at the piston's position;
+the steady state and the hold evidence leave out the hand-over (the NMPC may start the
+move early). Measured: seed 1 worst steady state 0.114 mm (0.122 mm with the early
+start), sine 1.00 mm; seed 4 the 1.8 s step's hold lands late (strict xfail below);
+seed 0's sine still above 1 mm on this profile (strict xfail), below it on the
+precision profile (designs/precision_positioning.py --quick: 0.99 mm).
+
 Tried and not kept (same profile): a hold that only closes the valve (a piston stuck
 under -20 to -33 N, above Coulomb friction, slid 6 mm with the valve closed); pulses
 whose reverse half is 1.5-2x the forward one (the net reverse force broke the piston
