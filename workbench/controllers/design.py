@@ -16,11 +16,19 @@ needs only ``x``, ``p_a``, ``p_b`` in its measurements (it never reads ``v``):
   band and back (a deadband-only rig, NMPC, 1 s hold: 0.44 mm peak-to-peak and 57
   command changes with the older lock, 0.0000 mm and 1 without);
 * the position law: ``"pid"`` (PID on the estimated state, derivative on the
-  estimated velocity, zero placed on the reduced model), ``"fl"`` (feedback
+  estimated velocity, zero placed on the reduced model, the preview's derivatives
+  fed forward through that model's inverse, the integral only on a still reference
+  near its target: :class:`VelocityPID`), ``"fl"`` (feedback
   linearisation on the observer's force estimate, the plant file's dry friction
   fed forward at the reference's velocity: :class:`~.feedback_linearizing.
   FeedbackLinearizing`'s ``friction``) or ``"nmpc"`` (RTI NMPC whose model keeps
   the plant's dry friction, smooth).
+
+The hold compares the reference clipped to the stroke the law may use (the NMPC's
+stroke margin) and, given the reference in advance, hands over to the law
+:func:`release_lead` before the reference leaves the held quantum (the NMPC's
+horizon; else the lines' round trip and a sample); it takes a stuck piston over
+within :func:`hold_range`.
 
 Given the whole reference in advance (``reference=``), a step is turned into a
 feasible smooth trajectory (:func:`workbench.references.smooth`, limits from

@@ -29,7 +29,7 @@ equation) for
 
 :class:`Observed` wraps any position controller that needs ``v`` (FL, NMPC, PID
 with velocity feedback) so that it runs on ``x``, ``p_a``, ``p_b`` only; it passes
-the estimates as ``x``, ``v`` and ``d`` (and the measured position as ``x_measured``).
+the estimates as ``x``, ``v``, ``d`` and ``a`` (and the measured position as ``x_measured``).
 
 Examples
 --------
@@ -218,7 +218,8 @@ class Observed:
     Every sample the observer updates (x, v, d) from the measured position and the
     pneumatic force of the measured pressures; the inner controller then gets
     ``x`` = estimated position, ``v`` = estimated velocity, ``d`` = estimated
-    unmodelled force (N, along -x), ``x_measured``, ``p_a``, ``p_b``. A ``v`` in the
+    unmodelled force (N, along -x), ``a`` = the model's acceleration (f - beta v -
+    d) / m (m/s^2), ``x_measured``, ``p_a``, ``p_b``. A ``v`` in the
     measurements is never read.
 
     Attributes
