@@ -154,9 +154,21 @@ def _intervals(pb, Xp, Up, shift, x0, up, zprev, dprev, est, P) -> list:
                    ca.fmin(ca.fmax(dprev, -pb.d_max), pb.d_max), True)
     X = ca.if_else(shift, ca.horzcat(Xp[:, 1:], Xp[:, N]), Xp)
     U = ca.if_else(shift, ca.horzcat(Up[:, 1:], Up[:, N - 1]), Up)
-    Xn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
-    inner = [] if pb.Fi is None else list(pb.Fi.map(N)(X[:, :N], U, ca.repmat(d, 1, N)))
+    Xn, A, B, *inner = _interval_and_points(pb).map(N)(X[:, :N], U, ca.repmat(d, 1, N))
     return [X, U, d, A, B, Xn - X[:, 1:], x0 - X[:, 0], *inner]
+
+
+def _interval_and_points(pb) -> ca.Function:
+    """``pb.Fj``, and with limits between the nodes ``pb.Fi`` too, as one function
+    (z, w, d) -> (z+, A, B[, Z, dZ/dz, dZ/dw]): the two integrate the same RK4 substeps,
+    computed once here (common subexpressions eliminated: with three points per
+    interval the linearisation took 61 us a sample as two maps, against 26 us without
+    the points; loaded machine)."""
+    if pb.Fi is None:
+        return pb.Fj
+    z, w, d = (ca.SX.sym(n, pb.Fj.sparsity_in(i)) for i, n in enumerate("zwd"))
+    return ca.Function("wb_nmpc_Fji", [z, w, d], [*pb.Fj(z, w, d), *pb.Fi(z, w, d)],
+                       {"cse": True})
 
 
 def prepare(pb) -> ca.Function:
