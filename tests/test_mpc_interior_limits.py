@@ -103,6 +103,11 @@ def test_interior_rows_are_in_the_qp(rig25):
     assert one.Fi is None and one.n_rows == 2 * one.N * len(one.soft)
     ipopt = NMPC.for_plant(rig25, jit=False, mode="ipopt", interior_limits=True)._problem
     assert ipopt.Fi is None and ipopt.n_rows == off.n_rows
+    # DAQP's tolerance is tightened only with these rows (qp.daqp_primal_tol): the
+    # plans without them stay those of DAQP's default, bit for bit
+    from workbench.controllers.mpc.qp import DAQP_PRIMAL_TOL, daqp_primal_tol
+    assert daqp_primal_tol(on) == DAQP_PRIMAL_TOL == 1e-9
+    assert daqp_primal_tol(off) is None and daqp_primal_tol(one) is None
 
 
 # ---------------------------------------------------------------- closed loop, compiled

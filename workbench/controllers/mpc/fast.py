@@ -48,7 +48,7 @@ from ...integrate.jit import (CompileError, cache_dir, have_compiler, shared_lib
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
 from .fast_c import CONFIG, DRIVER
-from .qp import DAQP_PRIMAL_TOL, apply_step, intervals
+from .qp import apply_step, daqp_primal_tol, intervals
 from .results import StepInfo
 
 __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
@@ -108,7 +108,7 @@ def _source(pb) -> str:
     return generated + DRIVER % {
         "N": pb.N, "NP": pb.P.size, "CFG": cfg, "NCFG": len(CONFIG), "NZ": nz, "NC": nc,
         "NRN": 2 * pb.N * len(pb.soft), "MINT": pb.m_int,
-        "KI0": pb.first_interior, "PRIMAL_TOL": DAQP_PRIMAL_TOL, "QP_TOL": QP_TOL,
+        "KI0": pb.first_interior, "PRIMAL_TOL": daqp_primal_tol(pb) or 0.0, "QP_TOL": QP_TOL,
         "QP_ROUNDS": QP_ROUNDS, "QP_WARM": int(QP_WARM), **_settings_layout(pb),
         "NSOFT": len(pb.soft), "SOFT_I": ", ".join(str(i) for i, _ in pb.soft),
         "SOFT_J": ", ".join(str(j) for _, j in pb.soft), "W_LO": float(pb.w_lo),

@@ -37,11 +37,12 @@ QP is solved cold, as CasADi's DAQP plugin does.
 
 A left-out row counts as violated beyond ``QP_TOL`` (scaled units: position / stroke,
 pressure / supply); DAQP's own tolerance on the rows it holds is its ``primal_tol``,
-:data:`.qp.DAQP_PRIMAL_TOL` (1e-9 on rows normalised by the factor of H; CasADi's
-plugin gets the same). The two solutions (this one and DAQP's on all rows) differ by
-rounding where their final working sets agree, and by at most a violation DAQP
-accepts where they do not (tests: <= 1e-8 in the plan; at DAQP's default 1e-6 they
-were 3e-7 apart with the limits between the nodes).
+:func:`.qp.daqp_primal_tol` (on rows normalised by the factor of H: 1e-9 with the
+limits between the nodes, else DAQP's default 1e-6; CasADi's plugin gets the same).
+The two solutions (this one and DAQP's on all rows) differ by rounding where their
+final working sets agree, and by at most a violation DAQP accepts where they do not
+(tests: <= 1e-8 in the plan; at DAQP's default 1e-6 they were 3e-7 apart with the
+limits between the nodes).
 
 The rows are ordered as :func:`.qp.condense` stacks them: per soft limit a lower and
 an upper block of N node rows, then per soft limit a lower and an upper block of
@@ -77,7 +78,7 @@ DRIVER = r"""
 #define NW (NZ + NC)     /* working set: the bounds, then the rows */
 #define NZI (NX * NN * MINT + 1)  /* interior points' states (+1: never empty) */
 #define QP_TOL %(QP_TOL)r
-#define PRIMAL_TOL %(PRIMAL_TOL)r  /* DAQP's primal_tol (qp.DAQP_PRIMAL_TOL) */
+#define PRIMAL_TOL %(PRIMAL_TOL)r  /* DAQP's primal_tol (qp.daqp_primal_tol; 0: its default) */
 #define QP_ROUNDS %(QP_ROUNDS)d
 #define QP_WARM %(QP_WARM)d
 %(CFG)s
@@ -221,7 +222,10 @@ static int qp_daqp(wb_fast_t *h, int nsub, int warm) {
      a set-up that fails frees the settings it holds) */
   memset(&h->work, 0, sizeof(h->work));
   if (setup_daqp(&p, &h->work, &t) < 0) r.exitflag = -1;
-  else { h->work.settings->primal_tol = PRIMAL_TOL; daqp_solve(&r, &h->work); }
+  else {
+    if (PRIMAL_TOL > 0.0) h->work.settings->primal_tol = PRIMAL_TOL;
+    daqp_solve(&r, &h->work);
+  }
   free_daqp_workspace(&h->work);
   free_daqp_ldp(&h->work);
   h->qps[0] += 1.0; h->qps[1] += nsub;

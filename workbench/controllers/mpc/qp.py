@@ -28,21 +28,34 @@ from .limits import interior_rows
 
 
 __all__ = ["sqp_step", "intervals", "condense", "prepare", "apply_step", "qp_solver", "INSIDE",
-           "DAQP_PRIMAL_TOL"]
+           "DAQP_PRIMAL_TOL", "daqp_primal_tol"]
 
 #: scaled command: the plan is kept this far inside the command range (1e-8 V on a 10 V
 #: span; see :func:`apply_step`)
 INSIDE = 1e-9
 
 #: DAQP's primal tolerance (its ``primal_tol``: the violation it accepts of a row, the
-#: row normalised by the factor of H), for the CasADi plugin and the compiled sample
-#: (:mod:`.fast_c`) alike. DAQP's default 1e-6 let a solve stop with a row violated by
-#: 3e-7 that another solve of the same QP (from another starting working set) held
-#: active: plans 3e-7 apart where both should give the one optimum (rig25, limits
-#: between the nodes). At 1e-9 the two agree to rounding, and a QP whose rows are all
-#: held to 1e-9 (scaled: position / stroke, pressure / supply) is the exact one for
-#: any plan it is used for.
+#: row normalised by the factor of H) with limits between the nodes, for the CasADi
+#: plugin and the compiled sample (:mod:`.fast_c`) alike (:func:`daqp_primal_tol`).
+#: There DAQP's default 1e-6 let a solve stop with a row violated by 3e-7 that another
+#: solve of the same QP (from another starting working set) held active: plans 3e-7
+#: apart where both should give the one optimum (rig25; a point's row between two
+#: nodes is nearly parallel to theirs). At 1e-9 the two agree to rounding.
 DAQP_PRIMAL_TOL = 1e-9
+
+
+def daqp_primal_tol(pb) -> float | None:
+    """DAQP's ``primal_tol`` for the problem: :data:`DAQP_PRIMAL_TOL` with limits
+    between the nodes, else None (DAQP's default, 1e-6).
+
+    Without those rows both solves agree to 1e-8 at the default (the tests of
+    :mod:`.fast`), and the default is kept: near a stuck piston the closed loop
+    amplifies the last bits of a plan, and the precision profile's figures move with
+    the tolerance (``precision_positioning.py --quick``, at 1e-9 against 1e-6: sine
+    worst 1.34 -> 0.98 mm on the nominal rig, but the perturbed rig's worst hold
+    21 -> 217 um): a change of outcome by rounding, neither better nor worse.
+    """
+    return DAQP_PRIMAL_TOL if getattr(pb, "m_int", 0) else None
 
 
 def sqp_step(pb, jit: bool | None = None) -> "ca.Function | _LazyStep":
@@ -93,7 +106,7 @@ class _LazyStep:
 
 def _step(pb, prep: ca.Function, post: ca.Function) -> ca.Function:
     """prep, the QP, post as one function (see :func:`sqp_step`)."""
-    qp = qp_solver(pb.c.qp_solver, pb.N + pb.ns, pb.n_rows)
+    qp = qp_solver(pb.c.qp_solver, pb.N + pb.ns, pb.n_rows, daqp_primal_tol(pb))
     ins = [ca.MX.sym(prep.name_in(i), prep.sparsity_in(i)) for i in range(prep.n_in())]
     o = prep(*ins)
     sol = qp(h=o[0], g=o[1], a=o[2], lba=o[3], uba=o[4], lbx=o[5], ubx=o[6])
@@ -141,9 +154,21 @@ def _intervals(pb, Xp, Up, shift, x0, up, zprev, dprev, est, P) -> list:
                    ca.fmin(ca.fmax(dprev, -pb.d_max), pb.d_max), True)
     X = ca.if_else(shift, ca.horzcat(Xp[:, 1:], Xp[:, N]), Xp)
     U = ca.if_else(shift, ca.horzcat(Up[:, 1:], Up[:, N - 1]), Up)
-    Xn, A, B = pb.Fj.map(N)(X[:, :N], U, ca.repmat(d, 1, N))
-    inner = [] if pb.Fi is None else list(pb.Fi.map(N)(X[:, :N], U, ca.repmat(d, 1, N)))
+    Xn, A, B, *inner = _interval_and_points(pb).map(N)(X[:, :N], U, ca.repmat(d, 1, N))
     return [X, U, d, A, B, Xn - X[:, 1:], x0 - X[:, 0], *inner]
+
+
+def _interval_and_points(pb) -> ca.Function:
+    """``pb.Fj``, and with limits between the nodes ``pb.Fi`` too, as one function
+    (z, w, d) -> (z+, A, B[, Z, dZ/dz, dZ/dw]): the two integrate the same RK4 substeps,
+    computed once here (common subexpressions eliminated: with three points per
+    interval the linearisation took 61 us a sample as two maps, against 26 us without
+    the points; loaded machine)."""
+    if pb.Fi is None:
+        return pb.Fj
+    z, w, d = (ca.SX.sym(n, pb.Fj.sparsity_in(i)) for i, n in enumerate("zwd"))
+    return ca.Function("wb_nmpc_Fji", [z, w, d], [*pb.Fj(z, w, d), *pb.Fi(z, w, d)],
+                       {"cse": True})
 
 
 def prepare(pb) -> ca.Function:
@@ -276,12 +301,14 @@ def apply_step(pb) -> ca.Function:
                        [Xn, Un, Un[0], viol, ok, ca.mmax(ca.fabs(du))])
 
 
-def qp_solver(name: str, nz: int, nc: int) -> ca.Function:
-    """The CasADi conic plugin ``name`` for a dense QP of nz variables and nc rows."""
+def qp_solver(name: str, nz: int, nc: int, primal_tol: float | None = None) -> ca.Function:
+    """The CasADi conic plugin ``name`` for a dense QP of nz variables and nc rows
+    (``primal_tol``: DAQP's, None its default)."""
     hs, As = ca.Sparsity.dense(nz, nz), ca.Sparsity.dense(nc, nz)
     opts: dict[str, Any] = {"error_on_fail": False}
     if name == "daqp":
-        opts.update(daqp={"primal_tol": DAQP_PRIMAL_TOL})
+        if primal_tol is not None:
+            opts.update(daqp={"primal_tol": float(primal_tol)})
     elif name == "qpoases":
         opts.update(printLevel="none", sparse=False)
     elif name == "osqp":
