@@ -62,7 +62,8 @@ def _search(costs, names, full=None, j0=1e4, n=1071.0):
 def test_the_best_effect_is_paired_with_every_candidate_when_a_correction_ranks_first():
     """Dry friction and 3.6 m lines at once (set case 3, every candidate, the costs
     measured there): alone, the joint nominal correction removes most (28 562 of
-    283 478 noise units left), friction ranks 4th and the lines 8th, outside the pool
+    283 478 noise units left), friction ranks 4th and the lines 7th (8th here, where no
+    closed-loop check sets the deadband aside), outside the pool
     of the best four; the best pairs are friction + correction (5 613) and friction +
     viscous friction, so no triple holds the lines either. Before, only the best single
     (the correction) was paired with every candidate: friction + lines (26 noise units

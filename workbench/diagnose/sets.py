@@ -304,9 +304,9 @@ def _pairs(refits: Refits, by: Mapping[str, Candidate], helps: Sequence[Ranked],
     part of any mismatch -- the effects of the best pair then (one more round): beside
     the correction the dominant effect pairs well, while the effect that the dominant
     one hides pairs only with the dominant one itself (measured: a
-    joint correction ranked first on a rig with dry friction and 3.6 m lines, the lines
-    8th alone; friction + correction was named at 5600 noise units, and friction +
-    lines, 26 at the concealed values, was never fitted)."""
+    joint correction ranked first on a rig with dry friction and 3.6 m lines, friction
+    4th and the lines 7th alone; friction + correction was named at 5600 noise units,
+    and friction + lines, 26 at the concealed values, was never fitted)."""
     fitted = 0
     anchors: list[str] = []
     new = [helps[0].name] if helps else []
@@ -321,8 +321,9 @@ def _pairs(refits: Refits, by: Mapping[str, Candidate], helps: Sequence[Ranked],
         # corrections absorb a little of any mismatch, so pairs "effect + correction"
         # crowd the top of the screening, where a pair of effects still far from its
         # optimum after SCREEN_NFEV iterations ranks below them (measured: leakage +
-        # supply droop screened 6th, at 28.4 noise units, behind five "leakage + a
-        # correction" of which none earned its place)
+        # supply droop screened 5th of the pairs, at 28.4 noise units, behind four
+        # "leakage + a correction" of which none earned its place; refitted fully, it
+        # was named, its three values within 1 % of the concealed ones)
         _refine(refits, by, scores, 2, FULL_SETS, max_nfev, n,
                 only=_best_effect_sets(scores, by, 2, FULL_SETS))
         anchors += new
