@@ -23,7 +23,7 @@ approximation W of the Jacobian, which is used here: positive diagonal entries o
 the Jacobian (the negative damping of a Stribeck friction curve) are left out of W
 so that a falling friction curve cannot make the linear solve singular. A step
 that cannot be accurate is redone with :data:`REFINE` sub-steps (evaluated only
-then): where its position's leading local error exceeds :data:`LOCAL_TOL` (a valve
+then): where its leading local error C3 h^3 J^2 f exceeds :data:`LOCAL_TOL` (a valve
 opening on the chambers), where the left-out growth rate is too fast for an explicit
 treatment (:data:`EXPLICIT_LIMIT`: the Stribeck range), and where the friction law
 switches inside it (a reversal, a break-away). The per-sample function (reset +
@@ -88,10 +88,12 @@ REFINE_AT_SWITCHES = True
 #: |C3| of ROS2's local error C3 h^3 J^2 f (:func:`_error_too_large`).
 ROS2_C3 = 1.0 / 6.0 - (4.0 * (1.0 + 0.5 ** 0.5) ** 3 - (1.0 + 2.0 ** 0.5) * 3.0
                        * (1.0 + 0.5 ** 0.5) ** 2)
-#: Local error a step may leave in the position, as a fraction of the stroke, before
-#: it is redone with :data:`REFINE` sub-steps: 1e-5 of the stroke (5 um on 0.5 m) is
-#: below the least significant bit of a 16-bit position sensor over the stroke.
-LOCAL_TOL = 1e-5
+#: Local error a step may leave in the position (fraction of the stroke) and in the
+#: chamber pressures (fraction of the supply pressure) before it is redone with
+#: :data:`REFINE` sub-steps: 1e-5 of the stroke is below the least significant bit of
+#: a 16-bit position sensor over the stroke (1.5e-5), 1e-4 of a 6 bar supply (60 Pa) a
+#: quarter of a 12-bit pressure sensor's over 0-10 bar (244 Pa).
+LOCAL_TOL = (1e-5, 1e-4)
 #: Physical bounds of any pressure state: above P_FLOOR x atmospheric, below
 #: P_CEIL x supply pressure.
 P_FLOOR = 0.02
@@ -200,22 +202,25 @@ def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step
 
 
 def _error_too_large(plant: Plant, J, fz, dt: float):
-    """1 where the step's leading local error in the position exceeds :data:`LOCAL_TOL`.
+    """1 where the step's leading local error in x, p_a or p_b exceeds :data:`LOCAL_TOL`.
 
     ROS2's local error is C3 h^3 J^2 f + O(h^4) on the linear part of the dynamics
     (its stability function R(z) = (1 - (2 gamma - 1) z) / (1 - gamma z)^2 has the z^3
     coefficient -1.207 where e^z has 1/6: C3 = -1.374); the position's is all of it,
-    since x' = v is linear: C3 h^3 (J f)_v, the jerk. The jerk is large where the valve
-    opens on the chambers (pressure rates of 1e7 Pa/s at a command step): one 2 ms
-    step then moved the piston 52 um backwards relative to the converged solution
-    (estimated 86 um), against 1.1 um with eight sub-steps. The pressures are not
-    tested: their rows hold the stiff modes (line nodes, a chamber at its dead volume)
-    for which the leading term overstates the error of the L-stable step by orders of
-    magnitude, and the force they exert shows in the jerk.
+    since x' = v is linear (its h^3 term is the jerk, (J f)_v). The jerk is large where
+    the valve opens on the chambers (pressure rates of 1e7 Pa/s at a command step):
+    one 2 ms step then moves the piston 52 um backwards relative to the converged
+    solution (estimated 86 um), against 1.1 um with eight sub-steps.
     """
-    iv = plant.state_index("v")
-    jerk = ca.mtimes(J[iv, :], fz)
-    return ca.fabs(jerk) * (ROS2_C3 * dt ** 3) > LOCAL_TOL * plant.stroke
+    prm = plant.params
+    tol = {"x": LOCAL_TOL[0] * plant.stroke,
+           "p_a": LOCAL_TOL[1] * prm["supply.pressure"],
+           "p_b": LOCAL_TOL[1] * prm["supply.pressure"]}
+    e = ca.mtimes(J, ca.mtimes(J, fz)) * (ROS2_C3 * dt ** 3)
+    bad = ca.MX(0) if isinstance(fz, ca.MX) else ca.SX(0)
+    for name, t in tol.items():
+        bad = ca.logic_or(bad, ca.fabs(e[plant.state_index(name)]) > t)
+    return bad
 
 
 def _repeated(one: ca.Function, n: int, nx: int, npar: int) -> ca.Function:
