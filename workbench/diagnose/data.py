@@ -233,10 +233,45 @@ def other_side(plant: Plant, side: str, p: np.ndarray, x: np.ndarray, v: np.ndar
 HELD = ("u", "r")
 
 
-def uniform(rec: Recording, dt: float) -> Recording:
+#: Share of the command's changes that must fit one regular clock of the controller's
+#: period for :func:`command_switches` to place them on it.
+CLOCK_SHARE = 0.9
+
+
+def command_switches(t: np.ndarray, u: np.ndarray, period: float
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+    """When the command changed, if a controller of ``period`` (s) updated it on its
+    own regular clock while the logger sampled it with jitter.
+
+    A change between samples j-1 and j happened at some instant in (t_{j-1}, t_j]; on
+    a regular clock k period + phi every such bracket holds one instant. The phase that
+    the most brackets admit is kept (scanned over 400 values, the middle of the best
+    run), provided :data:`CLOCK_SHARE` of them do; each change is then put at its clock
+    instant. Returns (instants, index of the sample showing the new value) or None.
+    """
+    j = np.flatnonzero(np.diff(u) != 0) + 1
+    if len(j) < 10 or not (period > 0):
+        return None
+    lo, hi = t[j - 1], t[j]
+    phi = np.arange(400) * (period / 400)
+    inst = phi[:, None] + period * (np.floor((lo[None, :] - phi[:, None]) / period) + 1.0)
+    ok = inst <= hi[None, :]
+    count = ok.sum(axis=1)
+    best = np.flatnonzero(count == count.max())
+    if count.max() < CLOCK_SHARE * len(j):
+        return None
+    runs = np.split(best, np.flatnonzero(np.diff(best) > 1) + 1)
+    run = max(runs, key=len)
+    k = int(run[len(run) // 2])
+    return np.where(ok[k], inst[k], hi), j
+
+
+def uniform(rec: Recording, dt: float, period: float | None = None) -> Recording:
     """``rec`` on a uniform grid of period ``dt`` (s) from its first sample: measured
     columns interpolated linearly, :data:`HELD` columns held from the last sample at or
-    before each grid time."""
+    before each grid time. With the controller's ``period`` (s), the command's changes
+    are first put on that controller's clock (:func:`command_switches`): a jittered
+    logger that sampled just before an update would otherwise delay it by a sample."""
     t = np.asarray(rec.t, dtype=float)
     grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
     cols = {}
@@ -244,7 +279,13 @@ def uniform(rec: Recording, dt: float) -> Recording:
         if name == "t":
             continue
         y = np.asarray(rec[name], dtype=float)
-        if name in HELD:
+        sw = command_switches(t, y, period) if name == "u" and period else None
+        if sw is not None:
+            when, j = sw
+            order = np.argsort(when, kind="stable")
+            k = np.searchsorted(when[order], grid + 1e-12 * dt, side="right")
+            cols[name] = np.where(k > 0, y[j[order][np.maximum(k - 1, 0)]], y[0])
+        elif name in HELD:
             idx = np.clip(np.searchsorted(t, grid + 1e-12 * dt, side="right") - 1, 0, len(t) - 1)
             cols[name] = y[idx]
         else:
@@ -359,8 +400,11 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto",
         notes.append(f"the sample time varies (mean {dt * 1e3:.3g} ms, range "
                      f"{steps.min() * 1e3:.3g}..{steps.max() * 1e3:.3g} ms): the recording is "
                      f"resampled on a uniform {dt * 1e3:.3g} ms grid (measurements linearly "
-                     "interpolated, the command and reference held as a logger's outputs are)")
-        rec = uniform(rec, dt)
+                     "interpolated, the command and reference held as a logger's outputs are; the "
+                     "command's updates on the controller's clock when they fit one)")
+        period = (plant.params["controller.sample_time"] if plant.params.has_controller
+                  else None)
+        rec = uniform(rec, dt, period)
         t = np.asarray(rec.t, dtype=float) - float(rec.t[0])
         n = len(t)
     if rec.duration < SHORT_DURATION:

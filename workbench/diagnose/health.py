@@ -43,6 +43,15 @@ STROKE_MARGIN = 0.05
 #: the error a perfect model would leave (the noise): a model error of the size of the
 #: noise doubles the error energy only at a ratio of sqrt(2); 3 is well clear of it.
 UNEXPLAINED_RATIO = 3.0
+#: s: window of :func:`rest_noise` (the position loop's and chambers' slowest time
+#: constants at rest are longer; a sensor's coloured noise of up to ~30 ms correlation
+#: time shows its full spread in it).
+REST_WINDOW = 0.2
+#: Fewest windows at rest for :func:`rest_noise` to be used.
+REST_WINDOWS_MIN = 5
+#: The spread at rest replaces the sample-to-sample noise in the noise floor when it is
+#: this many times larger (their statistical errors, a few % each, are far below it).
+COLOURED_FACTOR = 1.5
 
 
 #: s: shortest stick phase before a slip of a hunt (a few velocity-smoothing windows,
@@ -125,6 +134,35 @@ def check_replay(t: np.ndarray, measured: Mapping[str, np.ndarray],
         chk.failures.append(f"the replayed piston leaves the stroke [0, {stroke:g}] m by up "
                             f"to {worst:.3g} m ({_spans(t, out)})")
     return chk
+
+
+def rest_noise(y: np.ndarray, rest: np.ndarray, window: int) -> float:
+    """Noise spread of ``y`` at rest, slow (coloured) parts included: the median, over
+    windows of ``window`` samples inside the stretches at rest, of the standard
+    deviation about a quadratic fitted in each (what a leak or the gas settling after
+    a stop does within :data:`REST_WINDOW` is a quadratic to well within the noise).
+    The sample-to-sample estimate (:func:`workbench.signals.noise_floor`) sees only the
+    white part: an AR(1) noise of pole 0.95 is 3.2 x larger than it says; this one
+    sees what varies within the window (72 % of that noise's spread at 0.2 s and
+    1 kHz: its slowest part goes into the quadratic), so it is a lower bound of the
+    coloured noise too. 0.0 when fewer than :data:`REST_WINDOWS_MIN` windows fit."""
+    y = np.asarray(y, dtype=float)
+    rest = np.asarray(rest, dtype=bool)
+    if window < 8:
+        return 0.0
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], rest.astype(int), [0]])))
+    tt = np.linspace(-1.0, 1.0, window)
+    V = np.vander(tt, 3)
+    P = V @ np.linalg.pinv(V)
+    spreads = []
+    for a, b in zip(edges[::2], edges[1::2]):
+        for i in range(a, b - window + 1, window):
+            seg = y[i:i + window]
+            r = seg - P @ seg
+            spreads.append(float(np.sqrt(np.sum(r * r) / (window - 3))))
+    if len(spreads) < REST_WINDOWS_MIN:
+        return 0.0
+    return float(np.median(spreads))
 
 
 def floor_fit(y: np.ndarray, sigma: float) -> float:
@@ -356,8 +394,20 @@ def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[s
         for a, b in hunt:
             mask[a:b] = True
         text = ", ".join(f"{prep.t[a]:.1f}-{prep.t[b - 1]:.1f} s" for a, b in hunt)
+    noise = dict(prep.noise)
+    rest = masks.get("at rest")
+    if rest is not None:
+        for s in prep.signals:
+            slow = rest_noise(prep.measured(s), rest, int(round(REST_WINDOW / prep.dt)))
+            unit = "m" if s == "x" else "Pa"
+            if slow > COLOURED_FACTOR * noise.get(s, 0.0):
+                notes.append(
+                    f"the noise of {s} is coloured: at rest it spreads {slow:.3g} {unit} "
+                    f"({slow / max(noise[s], 1e-300):.1f} x its sample-to-sample level "
+                    f"{noise[s]:.3g} {unit}); the noise floor below uses the spread at rest")
+                noise[s] = slow
     remaining, still = unexplained({s: prep.measured(s) for s in prep.signals}, sim,
-                                   prep.noise, masks, prep.signals, label, mask, text)
+                                   noise, masks, prep.signals, label, mask, text)
     if still:
         still += [f"model-form limit of {f}: {MODEL_FORM[f]}" for f in dict.fromkeys(findings)
                   if f in MODEL_FORM]
