@@ -344,7 +344,7 @@ class HoldPositioner:
         return (f"held on the target's quantum ({self.quantum * 1e3:.4f} mm) once slow "
                 f"(< {self.lock_speed * 1e3:g} mm/s) or still for "
                 f"{self.dwell_samples * self.sample_time * 1e3:g} ms within "
-                f"{self.range * 1e3:g} mm: net force held near 0 (band "
+                f"{self.range * 1e3:.3g} mm: net force held near 0 (band "
                 f"{self.force_band:.2g} N), a piston stuck off the quantum pulsed in "
                 f"(2 x {self.width} samples, first opening {self.amplitude:.2g}, strength "
                 f"bisected between no move and overshoot)")
