@@ -126,23 +126,8 @@ def _loop_reference(k: int) -> float:
 def _same_loop(rig25, a, b, samples: int) -> float:
     """Largest difference of plan, command and force estimate of ``b`` against ``a``,
     both fed the measurements of the loop that ``a`` closes on the rig."""
-    from workbench.simulate import Simulator
-    sim = Simulator(rig25)
-    names = ("x", "v", "p_a", "p_b")
-    idx = [rig25.state_index(k) for k in names]
-    x = rig25.initial_state(0.10)
-    sa = sb = None
-    worst = 0.0
-    for k in range(samples):
-        y = {n: float(x[i]) for n, i in zip(names, idx)}
-        r = _loop_reference(k)
-        sa, ua = a.update(sa, r, y)
-        sb, ub = b.update(sb, r, y)
-        worst = max(worst, float(np.max(np.abs(np.asarray(sa.X) - np.asarray(sb.X)))),
-                    float(np.max(np.abs(np.asarray(sa.U).ravel() - np.asarray(sb.U).ravel()))),
-                    abs(ua - ub), abs(sa.d - sb.d) / 100.0)
-        x = sim.step(x, float(np.clip(ua, 0.0, 10.0)), 0.01)[-1]
-    return worst
+    from nmpc_loop import loop_difference
+    return loop_difference(rig25, a, b, samples, _loop_reference)
 
 
 @pytest.fixture(scope="module")

@@ -18,9 +18,10 @@ from workbench.controllers.mpc.fast import CompiledNMPC, compiled_unavailable
 from workbench.errors import InputError
 from workbench.simulate import Simulator
 
+from nmpc_loop import NAMES, loop_difference
+
 ROOT = Path(__file__).resolve().parents[1]
 RIG25 = ROOT / "designs" / "plants" / "rig25_mpye.toml"
-NAMES = ("x", "v", "p_a", "p_b")
 
 pytestmark = pytest.mark.skipif(compiled_unavailable() is not None,
                                 reason=f"compiled NMPC step: {compiled_unavailable()}")
@@ -62,26 +63,14 @@ def _compare(rig25, ours, ref, samples: int, counts: list | None = None) -> floa
     """Largest difference of plan, command, force estimate and iterations over a closed
     loop driven by the reference NMPC, both fed the same measurements (``counts``: the
     compiled sample's QP counts per sample appended)."""
-    sim = Simulator(rig25)
-    idx = [rig25.state_index(k) for k in NAMES]
-    x = rig25.initial_state(0.10)
-    sa = sf = None
-    worst = 0.0
-    for k in range(samples):
-        y = {n: float(x[i]) for n, i in zip(NAMES, idx)}
-        r = _reference(k)
-        sa, ua = ref.update(sa, r, y)
-        sf, uf = ours.update(sf, r, y)
-        worst = max(worst, float(np.max(np.abs(np.asarray(sa.X) - np.asarray(sf.X)))),
-                    float(np.max(np.abs(np.asarray(sa.U).ravel() - np.asarray(sf.U).ravel()))),
-                    abs(ua - uf), abs(sa.d - sf.d) / 100.0, abs(sa.u_prev - sf.u_prev))
+    def extra(sa, sf):
         info = ours.info(sf) if isinstance(ours, CompiledNMPC) else sf.info
         if counts is not None:
             counts.append(sf.qp_counts())
         assert info.iterations == sa.info.iterations and info.success == sa.info.success
         assert info.restarted == sa.info.restarted
-        x = sim.step(x, float(np.clip(ua, 0.0, 10.0)), 0.01)[-1]
-    return worst
+        return abs(sa.u_prev - sf.u_prev)
+    return loop_difference(rig25, ref, ours, samples, _reference, extra)
 
 
 def test_compiled_rti_gives_the_same_plans(rig25, nmpc, fast):

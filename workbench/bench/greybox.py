@@ -11,7 +11,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from .timing import baseline, machine, summary, unavailable
+from .timing import baseline, interleaved, machine, unavailable
 
 __all__ = ["bench"]
 
@@ -23,21 +23,13 @@ SAME_ACCURACY_STD = 0.25
 
 
 def _timed(fns: Mapping[str, Callable[[], Any]], repeats: int):
-    """Run each function ``repeats`` times, round-robin: (last results, summary each).
+    """Run each function ``repeats`` times, round-robin, no warm-up: (last results,
+    summary each).
 
     CPU time is ``time.process_time`` (all threads of this process): the estimator
     maps its shooting intervals over up to 8 threads, which ``thread_time`` would miss.
     """
-    results: dict[str, Any] = {}
-    walls = {k: [] for k in fns}
-    cpus = {k: [] for k in fns}
-    for _ in range(max(1, repeats)):
-        for name, fn in fns.items():
-            c0, t0 = time.process_time(), time.perf_counter()
-            results[name] = fn()
-            walls[name].append(time.perf_counter() - t0)
-            cpus[name].append(time.process_time() - c0)
-    return results, {k: summary(walls[k], cpus[k]) for k in fns}
+    return interleaved(fns, repeats, warmup=False, cpu_clock=time.process_time)
 
 TRUTH = {"load.mass": 1.2, "load.viscous_friction": 40.0,
          "valve.sonic_conductance": 6.25e-8, "leakage.conductance_to_atmosphere": 5e-10}

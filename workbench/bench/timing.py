@@ -40,11 +40,13 @@ def summary(walls, cpus) -> dict[str, Any]:
 
 
 def interleaved(fns: Mapping[str, Callable[[], Any]], repeats: int,
-                warmup: bool = True) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+                warmup: bool = True, cpu_clock: Callable[[], float] = time.thread_time
+                ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
     """Run each function ``repeats`` times, round-robin; (last results, :func:`summary` each).
 
-    Wall time by ``time.perf_counter``, CPU time by ``time.thread_time`` (the calling
-    thread: robust to other processes, blind to work in other threads). With
+    Wall time by ``time.perf_counter``, CPU time by ``cpu_clock``: by default
+    ``time.thread_time`` (the calling thread: robust to other processes, blind to work
+    in other threads; ``time.process_time`` counts all threads of this process). With
     ``warmup`` each function runs once first, untimed (first-call costs: page faults,
     lazy loading).
     """
@@ -56,10 +58,10 @@ def interleaved(fns: Mapping[str, Callable[[], Any]], repeats: int,
     cpus: dict[str, list[float]] = {k: [] for k in fns}
     for _ in range(max(1, int(repeats))):
         for name, fn in fns.items():
-            c0, t0 = time.thread_time(), time.perf_counter()
+            c0, t0 = cpu_clock(), time.perf_counter()
             results[name] = fn()
             walls[name].append(time.perf_counter() - t0)
-            cpus[name].append(time.thread_time() - c0)
+            cpus[name].append(cpu_clock() - c0)
     return results, {k: summary(walls[k], cpus[k]) for k in fns}
 
 
