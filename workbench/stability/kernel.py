@@ -336,11 +336,6 @@ def _unique_rows(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 #: 3.6 ms with fmax / fmin inlined too (the same numbers, bit for bit).
 _FLAGS = (("-O2", "-fno-math-errno", "-fno-semantic-interposition"),
           ("-O2", "-fno-math-errno"), ("-O2",))
-#: IEEE fmax / fmin (a NaN operand gives the other) as expressions the compiler inlines
-_MINMAX = """/* workbench.stability: fmax / fmin inlined (IEEE: a NaN operand gives the other) */
-#define WB_FMAX(x, y) ((x) != (x) ? (y) : (y) != (y) ? (x) : (x) > (y) ? (x) : (y))
-#define WB_FMIN(x, y) ((x) != (x) ? (y) : (y) != (y) ? (x) : (x) < (y) ? (x) : (y))
-"""
 
 
 def _compiled(fun: ca.Function) -> ca.Function:
@@ -357,9 +352,7 @@ def _compiled(fun: ca.Function) -> ca.Function:
         gen.add(fun)
         gen.generate(tmp + os.sep)
         src = Path(tmp, f"{fun.name()}.c").read_text()
-    out = src.replace("return fmax(x, y);", "return WB_FMAX(x, y);")
-    out = out.replace("return fmin(x, y);", "return WB_FMIN(x, y);")
-    src = _MINMAX + out if out != src else src
+    src = _jit.inline_minmax(src)
     try:
         path, _ = _jit.shared_library(fun.name(), src, _FLAGS)
     except _jit.CompileError:
