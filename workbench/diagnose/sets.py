@@ -424,7 +424,7 @@ def _refine(refits: Refits, by: Mapping[str, Candidate], scores: dict, size: int
 
 def _project_pairs(refits: Refits, by: Mapping[str, Candidate], scores: dict, max_nfev: int,
                    n: float, most: int = 2) -> int:
-    """The best pair (BIC) whose members both earn their place against its singles:
+    """The best pair (BIC) that beats every single and whose members both earn their place:
     each single refitted again from the pair's fit with the other member at its neutral
     values (:func:`_project`); when the pair then no longer earns, the next such pair
     (at most ``most``). A member "earns" by making up for its partner's single fit
@@ -435,8 +435,10 @@ def _project_pairs(refits: Refits, by: Mapping[str, Candidate], scores: dict, ma
     18.3 and the leak removes 5 %). Returns the refits made."""
     fitted = 0
     for _ in range(most):
-        pairs = sorted((v for k, v in scores.items() if len(k) == 2 and v.result is not None),
-                       key=lambda v: v.bic)
+        # only a pair that beats every single can be chosen (lowest BIC) and needs this
+        best1 = min((v.bic for k, v in scores.items() if len(k) == 1), default=math.inf)
+        pairs = sorted((v for k, v in scores.items() if len(k) == 2 and v.result is not None
+                        and v.bic < best1), key=lambda v: v.bic)
         pair = next((s for s in pairs
                      if all((b,) in scores and _earns(scores[(b,)], s) for b in s.names)), None)
         if pair is None or pair.projected:
