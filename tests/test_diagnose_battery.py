@@ -129,13 +129,22 @@ def _case(rig, kind: str) -> tuple[Path, str]:
     if kind == "time in ms, not said":
         return (_damaged(rig, "ms.csv", _scaled(rig, "t", 1e3)),
                 r"column 't': the median sample step is 1 s .*time in ms\?")
+    if kind == "time stamps rounded to 10 ms":
+        b = [",".join([f"{float(line.split(',')[0]):.2f}"] + line.split(",")[1:]) for line in body]
+        return (_damaged(rig, "rounded.csv", head + b),
+                r"column 't': time is not strictly increasing.* steps repeat a time stamp: "
+                r"the time is written with too few digits \(resolution 0.01 s\)")
+    if kind == "two runs in one file":
+        return (_damaged(rig, "two.csv", head + body + body),
+                rf", line {n_head + len(body) + 1}, column 't': time is not strictly "
+                r"increasing.*steps back by 4 s: several runs in one file\? give each run")
     raise ValueError(kind)
 
 
 KINDS = ["cut off last line", "NaN cell", "empty cell", "time steps back",
          "duplicate time stamp", "column missing", "header only", "0.5 s recording",
          "position in mm, not said", "pressure in gauge bar, not said",
-         "time in ms, not said"]
+         "time in ms, not said", "time stamps rounded to 10 ms", "two runs in one file"]
 
 
 def _out_with_old_file(tmp_path: Path) -> Path:
