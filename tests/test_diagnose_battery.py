@@ -228,3 +228,19 @@ def test_stopped_while_fitting_exits_with_the_signal_and_writes_nothing(rig, sig
     assert proc.returncode == code, "".join(seen) + rest
     assert ("interrupted" if sig == signal.SIGINT else "terminated") in rest
     _nothing_new(out)
+
+
+def test_an_input_inside_out_under_an_output_name_is_refused_before_the_work(rig, tmp_path,
+                                                                            capsys):
+    """A plant file called plant.augmented.toml in the --out folder would be overwritten
+    by the result: refused at once (not after the fits), the file unchanged."""
+    out = _out_with_old_file(tmp_path)
+    plant = out / "plant.augmented.toml"
+    plant.write_text(rig.plant.read_text())
+    t0 = time.process_time()
+    code = main(["diagnose", str(plant), str(rig.csv), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "would overwrite the input" in err, err
+    assert time.process_time() - t0 < 5.0     # refused before the replay and the fits
+    assert plant.read_text() == rig.plant.read_text()
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt", "plant.augmented.toml"]
