@@ -712,3 +712,57 @@ def test_check_of_an_in_memory_recording(situm_params):
         gap.check()
     with pytest.raises(InputError, match=r"column 'x', index 0: 200 m is implausible"):
         Recording.from_arrays(T_1K, u=np.full(T_1K.size, 5.0), x=X_M * 1e3).check(situm_params)
+
+
+# ---- files as spreadsheet programs and interrupted loggers write them -----------------
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_decimal_comma_with_another_separator_is_read(tmp_path, sep):
+    """European spreadsheets write ';' (or tab) separated cells with decimal commas:
+    the same numbers as the comma-separated file, exactly (both parse one decimal
+    string per cell)."""
+    reference = load_recording(csv_with(tmp_path, ROWS))
+    rows = [r.replace(",", sep).replace(".", ",") for r in ROWS]
+    rec = load_recording(write(tmp_path, HEADER.replace(",", sep) + "\n" + "\n".join(rows)
+                               + "\n", "comma.csv"))
+    for name in reference.columns:
+        np.testing.assert_array_equal(rec[name], reference[name])
+
+
+def test_decimal_comma_only_when_no_cell_has_a_point(tmp_path):
+    """A comma beside points elsewhere may be a thousands separator: not guessed."""
+    rows = [r.replace(",", ";") for r in ROWS]
+    rows[1] = rows[1].replace("313600.0", "313,600")
+    path = write(tmp_path, HEADER.replace(",", ";") + "\n" + "\n".join(rows) + "\n")
+    with raises(path, r", line 3, column 'p_a': '313,600' is not a number \(decimal comma"):
+        load_recording(path)
+
+
+def test_bom_crlf_and_utf16_files_read_the_same(tmp_path):
+    reference = load_recording(csv_with(tmp_path, ROWS))
+    text = "# sample_time: 0.001\n" + HEADER + "\n" + "\n".join(ROWS) + "\n"
+    variants = {"bom.csv": ("\ufeff" + text).encode("utf-8"),
+                "crlf.csv": text.replace("\n", "\r\n").encode("utf-8"),
+                "utf16.csv": text.encode("utf-16"),           # with its byte-order mark
+                "utf16be.csv": b"\xfe\xff" + text.encode("utf-16-be")}
+    for name, data in variants.items():
+        (tmp_path / name).write_bytes(data)
+        rec = load_recording(tmp_path / name)
+        assert rec.columns == reference.columns, name
+        for col in rec.columns:
+            np.testing.assert_array_equal(rec[col], reference[col])
+
+
+def test_cut_off_last_line_is_named_as_such(tmp_path):
+    """A logger stopped mid-write leaves a last line without its line end."""
+    text = "# sample_time: 0.001\n" + HEADER + "\n" + "\n".join(ROWS) + "\n0.004,5.4,0.2"
+    path = write(tmp_path, text)
+    with raises(path, r", line 7: 3 cells in this row but the header has 6 .*the last "
+                      r"line is cut off"):
+        load_recording(path)
+    # the same short row inside the file is not called cut off
+    path = write(tmp_path, text + "54\n0.005,5.4,0.254,313900.0,313300.0,0.25\n", "mid.csv")
+    with pytest.raises(InputError) as info:
+        load_recording(path)
+    assert "line 7: 3 cells" in str(info.value) and "cut off" not in str(info.value)

@@ -79,7 +79,7 @@ class CsvWhere(Where):
         if self.row_lines is None:
             # Only reached when reporting an error: scan the file once for row lines.
             self.row_lines = []
-            with open(self.path, encoding="utf-8-sig") as fh:
+            with open(self.path, encoding=text_encoding(self.path)) as fh:
                 for lineno, raw in enumerate(fh, start=1):
                     if lineno > self.header_line and _strip_comment(raw):
                         self.row_lines.append(lineno)
@@ -129,6 +129,38 @@ def _check_file(path: Path) -> None:
         raise InputError("the file is empty", source=str(path))
 
 
+def text_encoding(path: Path) -> str:
+    """The text encoding to read ``path`` with: UTF-16 when the file starts with its
+    byte-order mark (spreadsheet programs' "Unicode text"), else UTF-8 with an optional
+    BOM ("utf-8-sig")."""
+    with open(path, "rb") as fh:
+        head = fh.read(2)
+    return "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
+
+
+def _decimal(rows: str, sep: str | None) -> str:
+    """"," when the rows write numbers with a decimal comma: only possible with another
+    separator (";", tab, spaces), and only if no cell of the first data rows holds a
+    point (a comma might otherwise be a thousands separator); else "."."""
+    if sep == "," or "," not in rows or "." in rows:
+        return "."
+    return ","
+
+
+def _first_rows(fh: Any, count: int = 20) -> str:
+    """The first ``count`` data lines after the current position (comments stripped),
+    joined by newlines ("" without data)."""
+    rows: list[str] = []
+    while len(rows) < count:
+        raw = fh.readline()
+        if raw == "":
+            break
+        text = _strip_comment(raw)
+        if text:
+            rows.append(text)
+    return "\n".join(rows)
+
+
 def _strip_comment(raw: str) -> str:
     """Text of a data line without a trailing '#' comment and surrounding space."""
     return raw.split("#", 1)[0].strip()
@@ -143,23 +175,27 @@ def read_csv(path: Path) -> Parsed:
     src = str(path)
     _check_file(path)
     try:
-        with open(path, encoding="utf-8-sig") as fh:
+        with open(path, encoding=text_encoding(path)) as fh:
             metadata, meta_lines, header, header_line = _read_preamble(fh, src)
             columns, sep = _parse_header(header, header_line, src)
             trailing = 1 if sep and header.rstrip().endswith(sep) else 0
-            arrays = _fast_parse(fh, len(columns), sep, trailing)
+            start = fh.tell()
+            decimal = _decimal(_first_rows(fh), sep)
+            fh.seek(start)
+            arrays = _fast_parse(fh, len(columns), sep, trailing, decimal)
         where = CsvWhere(path, header_line, meta_lines)
         if isinstance(arrays, tuple):
             # pandas pointed at one bad row: check only that line, which raises ...
             kind, k = arrays
             if kind == "row":
-                _slow_parse(path, header_line, columns, sep, src, only_row=k)
+                _slow_parse(path, header_line, columns, sep, src, only_row=k, decimal=decimal)
             else:
                 _slow_parse(path, header_line, columns, sep, src,
-                            only_line=header_line + k)
+                            only_line=header_line + k, decimal=decimal)
             arrays = None  # ... unless pandas and Python disagree: then scan it all
         if arrays is None:
-            arrays, where.row_lines = _slow_parse(path, header_line, columns, sep, src)
+            arrays, where.row_lines = _slow_parse(path, header_line, columns, sep, src,
+                                                  decimal=decimal)
     except UnicodeDecodeError as exc:
         raise InputError(f"not a UTF-8 text file (undecodable byte at offset {exc.start}); "
                          "a recording CSV is plain text", source=src) from None
@@ -241,7 +277,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0
+def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0, decimal: str = "."
                 ) -> list[np.ndarray] | tuple[str, int] | None:
     """Parse the data rows with pandas' C reader.
 
@@ -273,7 +309,7 @@ def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0
             warnings.simplefilter("ignore", pd.errors.DtypeWarning)  # mixed: text cells
             frame = pd.read_csv(fh, sep=sep if sep else r"\s+", header=None,
                                 engine="c", comment="#", skip_blank_lines=True,
-                                index_col=False)
+                                index_col=False, decimal=decimal)
     except UnicodeDecodeError:
         raise
     except pd.errors.ParserError as exc:
@@ -305,18 +341,19 @@ def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0
 
 
 def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | None,
-                src: str, only_row: int | None = None, only_line: int | None = None
-                ) -> tuple[list[np.ndarray], list[int]]:
+                src: str, only_row: int | None = None, only_line: int | None = None,
+                decimal: str = ".") -> tuple[list[np.ndarray], list[int]]:
     """Parse row by row, raising on the first bad line; also return each row's line.
 
     With ``only_row`` (0-based data row) or ``only_line`` (1-based file line), skip to
-    that row without parsing the others, and check only it.
+    that row without parsing the others, and check only it. ``decimal``: "," for
+    numbers written with a decimal comma (:func:`_decimal`).
     """
     ncols = len(columns)
     rows: list[list[float]] = []
     row_lines: list[int] = []
     count = -1
-    with open(path, encoding="utf-8-sig") as fh:
+    with open(path, encoding=text_encoding(path)) as fh:
         for lineno, raw in enumerate(fh, start=1):
             if lineno <= header_line:
                 continue
@@ -332,12 +369,17 @@ def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | Non
             while len(cells) > ncols and not cells[-1].strip():
                 cells.pop()  # a trailing delimiter
             if len(cells) != ncols:
+                cut = "" if raw.endswith("\n") or len(cells) > ncols else (
+                    ": the last line is cut off (the logger stopped while writing it?); "
+                    "delete that line")
                 raise InputError(f"{len(cells)} cells in this row but the header has "
-                                 f"{ncols} ({','.join(columns)})", source=src,
+                                 f"{ncols} ({','.join(columns)}){cut}", source=src,
                                  location=f"line {lineno}")
             row = []
             for name, cell in zip(columns, cells):
                 cell = cell.strip().strip('"').strip()
+                if decimal == ",":
+                    cell = cell.replace(",", ".")
                 try:
                     value = float(cell)
                 except ValueError:

@@ -59,9 +59,13 @@ def register(subparsers) -> None:
 
 def _diagnose(args: argparse.Namespace) -> int:
     """Run the sub-command (errors a user can cause are WorkbenchError: exit 2 in main)."""
+    from pathlib import Path
+
     from ..diagnose import diagnose
-    from ..output import check_output_dir
+    from ..diagnose.result import OUTPUT_FILES
+    from ..output import check_not_input, check_output_dir
     check_output_dir(args.out)            # refused before minutes of work, not after
+    check_not_input([Path(args.out) / n for n in OUTPUT_FILES], [args.plant, *args.recording])
     verbose = not args.quiet and not args.json
     if verbose:
         print(f"diagnosing {', '.join(args.recording)} on {args.plant} ...", file=sys.stderr,

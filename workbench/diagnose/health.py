@@ -34,7 +34,8 @@ from ..signals import fit
 from .data import Prepared
 
 __all__ = ["DiagnosisError", "ReplayCheck", "check_replay", "floor_fit", "unexplained", "verdict",
-           "hunting", "STROKE_MARGIN", "UNEXPLAINED_RATIO", "HUNT_STICK"]
+           "hunting", "gauge_hint", "STROKE_MARGIN", "UNEXPLAINED_RATIO", "HUNT_STICK",
+           "GAUGE_BAND"]
 
 #: Share of the stroke beyond an end stop that no working replay reaches (the stops'
 #: contact at 300 Hz lets a 1 m/s piston in by well under 1 mm).
@@ -52,6 +53,12 @@ REST_WINDOWS_MIN = 5
 #: The spread at rest replaces the sample-to-sample noise in the noise floor when it is
 #: this many times larger (their statistical errors, a few % each, are far below it).
 COLOURED_FACTOR = 1.5
+
+
+#: The nominal replay's pressures above the recorded ones by atmospheric pressure within
+#: this relative band, on every recorded chamber, suggest gauge readings (a wrong nominal
+#: value shifts the two chambers by different amounts, and rarely by exactly 1 atm).
+GAUGE_BAND = 0.25
 
 
 #: s: shortest stick phase before a slip of a hunt (a few velocity-smoothing windows,
@@ -314,6 +321,34 @@ def hunting(prep: Prepared, v_rest: float) -> list[tuple[int, int]]:
     return out
 
 
+def gauge_hint(prep: Prepared, sim0: Mapping[str, np.ndarray]) -> str:
+    """A sentence when the recorded pressures look like gauge readings, else "".
+
+    Gauge pressures within the absolute range (a loop whose chambers never vent) pass
+    the recording's checks; the nominal replay then runs about one atmosphere above
+    every recorded chamber pressure (the median offset, robust to the transients a
+    missing effect leaves). A leak to atmosphere or a lower supply can shift both
+    chambers by as much: the level alone cannot tell them apart, so the sentence
+    names both readings and the diagnosis goes on.
+    """
+    p_atm = float(prep.plant.params["gas.atmospheric_pressure"])
+    offsets = {}
+    for s in prep.pressures:
+        y = np.asarray(sim0.get(s, ()), dtype=float)
+        if y.shape != prep.measured(s).shape or not np.isfinite(y).all():
+            return ""
+        offsets[s] = float(np.median(y - prep.measured(s)))
+    if not offsets or any(abs(d / p_atm - 1.0) > GAUGE_BAND for d in offsets.values()):
+        return ""
+    said = ", ".join(f"{s} by {d / 1e5:.2f} bar" for s, d in offsets.items())
+    units = ", ".join(f"{s}=Pa_g" for s in offsets)
+    return (f"the recorded pressures lie below the nominal replay's by about atmospheric "
+            f"pressure ({said}; {p_atm / 1e5:.3f} bar): if the logger writes gauge "
+            f"pressures, declare them ('# units: {units}', or bar_g / kPa_g) and diagnose "
+            "again; if they are absolute, something lowers both chambers (a leak to "
+            "atmosphere, a lower supply)")
+
+
 def _check(prep: Prepared, sim: Mapping[str, np.ndarray]) -> ReplayCheck:
     """:func:`check_replay` of a replay of the prepared recording."""
     return check_replay(prep.t, {s: prep.measured(s) for s in prep.signals}, sim,
@@ -364,11 +399,15 @@ def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[s
     """
     notes = list(prep.notes)
     check0 = _check(prep, sim0)
+    gauge = gauge_hint(prep, sim0)
+    if gauge:
+        notes.append(gauge)
     if not findings:
         if not check0.ok:
             raise DiagnosisError(
                 "the nominal plant does not reproduce the recording and no candidate "
-                f"explains why: {check0.cause()}. "
+                f"explains why: {check0.cause()}. " + (f"{gauge[0].upper()}{gauge[1:]}. "
+                                                       if gauge else "")
                 + "".join(f"{n}. " for n in no_finding)
                 + "Check the plant file (units, supply, valve size, stroke, controller) "
                   "and the recording's columns against formats.md sections 1-3.")

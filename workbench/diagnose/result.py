@@ -15,7 +15,7 @@ from ..params import PlantParams, atomic_write_text
 from .data import Prepared
 from .explain import Ranked
 
-__all__ = ["Finding", "Diagnosis"]
+__all__ = ["Finding", "Diagnosis", "OUTPUT_FILES"]
 
 
 @dataclass(frozen=True)
@@ -162,8 +162,8 @@ class Diagnosis:
         the plant and recording files) are never overwritten."""
         from ..output import result_set
         out = Path(out_dir)
-        names = {"json": "diagnosis.json", "plant": "plant.augmented.toml",
-                 "details": "details.json"}
+        names = {"json": OUTPUT_FILES[0], "plant": OUTPUT_FILES[1],
+                 "details": OUTPUT_FILES[2]}
         ins = list(inputs) or [self.plant_file, *self.recording_file.split(" + ")]
         with result_set(out, inputs=[i for i in ins if i]) as stage:
             atomic_write_text(stage / names["json"], json.dumps(self.to_dict(), indent=2) + "\n")
@@ -175,6 +175,11 @@ class Diagnosis:
                 html, pdf = write_report(self, stage)
                 names["html"], names["pdf"] = Path(html).name, Path(pdf).name
         return {k: out / v for k, v in names.items()}
+
+
+#: The files :meth:`Diagnosis.write` puts in its folder (the report's last two).
+OUTPUT_FILES = ("diagnosis.json", "plant.augmented.toml", "details.json", "report.html",
+                "report.pdf")
 
 
 def _jsonable(v):
