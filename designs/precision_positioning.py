@@ -10,9 +10,11 @@
    p_a, p_b), the deadband inverted, a precision hold against stick-slip hunting
    (workbench.controllers.hold: net force held at zero, locked on the target's
    quantum, a stuck piston moved by adapted force pulses), the
-   reference smoothed to the axis's limits and fed forward (FL and NMPC), the plant
-   file's dry friction fed forward at the reference's velocity (FL; the NMPC
-   predicts with it).
+   reference smoothed to the axis's limits (the valve's flow, or the lines' where
+   they pass less) and fed forward (PID through the reduced model's inverse, FL,
+   NMPC), the plant file's dry friction fed forward (FL at the reference's
+   velocity, PID its rate; the NMPC predicts with it), and PID and FL drive a
+   stuck piston that the reference moves on to the static friction (break-away).
 3. Each is validated on the full plant over the precision profile and judged by the
    precision specification (steady state within one quantum, overshoot <= 2 %, worst
    error on the 60 mm, 0.5 Hz sine <= 1 mm); the published rig results (0.05 mm

@@ -239,7 +239,7 @@ def test_report_says_how_each_law_uses_the_friction_model():
     said = {k: _friction_text(design(plant, k, jit=False).inner.inner) for k in ("pid", "fl", "nmpc")}
     assert said["fl"].startswith("plant file's friction (Coulomb 15 N, static 25 N)")
     assert said["nmpc"] == "in the prediction model (smooth form)"
-    assert said["pid"] == "none (integral action)"
+    assert said["pid"].startswith("plant file's friction (Coulomb 15 N, static 25 N): its rate")
 
 
 def test_pid_integral_only_on_a_still_reference_near_its_target_and_clamped():
@@ -273,4 +273,60 @@ def test_the_hold_takes_over_where_the_pid_cannot_move_a_stuck_piston():
     pid = design(plant, "pid", jit=False)
     zone = 0.1 * 0.02 * 5.0 / pid.inner.inner.kp
     assert zone > 2e-3 and pid.inner.hold.range == pytest.approx(2 * zone, rel=1e-12)
-    assert design(plant, "fl", jit=False).inner.hold.range == 2e-3
+    # FL: the break-away jump 2 (F_s - F_c) / k on the closed chambers' gas spring at
+    # mid-stroke, k = n p_m (A^2 / V_a + A^2 / V_b), each volume half the stroke's,
+    # its dead volume and its 1 m line of 4 mm bore (hand numbers, precision rig)
+    A = math.pi / 4 * 0.025 ** 2
+    V = A * 0.25 + 5e-6 + math.pi / 4 * 0.004 ** 2 * 1.0
+    k = 1.2 * 0.5 * (6e5 + 101325.0) * 2 * A * A / V
+    assert design(plant, "fl", jit=False).inner.hold.range == pytest.approx(2 * 10.0 / k, rel=1e-12)
+
+
+# ------------------------------------------------------------------ lines and break-away
+def test_line_flow_is_the_steady_flow_of_the_line_model():
+    # independent: the same friction law (laminar + Blasius) integrated along the
+    # line by scipy's adaptive RK45 at tight tolerance, the flow by brentq; the
+    # function under test marches 200 fixed pieces and bisects (agreement within
+    # the march's discretisation, 0.1 %)
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import brentq
+    from workbench.controllers.design import line_flow
+    from workbench.physics.line import pressure_drop
+    L, d, T, p_in, p_out = 1.0, 0.004, 293.15, 6e5, 3.5e5
+
+    def end(q):
+        sol = solve_ivp(lambda s, p: [-float(pressure_drop(q, p[0], d, 1.0, T))], (0, L),
+                        [p_in], rtol=1e-10, atol=1e-6)
+        return sol.y[0, -1] - p_out
+
+    want = brentq(end, 1e-4, 0.02, xtol=1e-12)
+    assert line_flow(L, d, p_in, p_out, T) == pytest.approx(want, rel=1e-3)
+    # a longer line passes less; a line passes nothing without a pressure drop
+    assert line_flow(10.0, d, p_in, p_out, T) < 0.5 * want
+    with pytest.raises(InputError, match="p_in > p_out"):
+        line_flow(L, d, p_out, p_in, T)
+
+
+def test_axis_limits_with_lines_are_limited_by_the_line_flow():
+    from workbench.controllers.design import line_flow
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    lim = axis_limits(plant, margin=1.0)
+    q = line_flow(1.0, 0.004, 6e5, 0.5 * (6e5 + 101325.0), 293.15)
+    A = math.pi / 4 * 0.025 ** 2
+    assert q < 0.3 * 6.25e-8 * 6e5 * 1.185        # the line, not the valve, limits
+    assert lim.speed == pytest.approx(q * 287 * 293.15 / (3.506625e5 * A), rel=1e-9)
+
+
+def test_breakaway_state_enters_stuck_and_leaves_on_a_measured_move():
+    from workbench.controllers.feedback_linearizing import breakaway
+    vs = 0.01
+    # moving piston, or a reference slower than v_s: none
+    assert breakaway(None, 0.1, 0.05, 0.2, vs) is None
+    assert breakaway(None, 0.005, 0.0, 0.2, vs) is None
+    brk = breakaway(None, -0.1, 0.002, 0.2, vs)
+    assert brk == (-1.0, 0.2)
+    # held while the position has not moved, whatever the (noisy) speed estimate says
+    assert breakaway(brk, -0.1, -0.03, 0.2, vs) == brk
+    assert breakaway(brk, -0.1, 0.0, 0.2 + 1.2e-4, vs) == brk     # moved the wrong way
+    assert breakaway(brk, -0.1, 0.0, 0.2 - 1.2e-4, vs) is None    # broke away
+    assert breakaway(brk, 0.1, 0.0, 0.2, vs) is None              # direction changed

@@ -17,12 +17,15 @@ needs only ``x``, ``p_a``, ``p_b`` in its measurements (it never reads ``v``):
   command changes with the older lock, 0.0000 mm and 1 without);
 * the position law: ``"pid"`` (PID on the estimated state, derivative on the
   estimated velocity, zero placed on the reduced model, the preview's derivatives
-  fed forward through that model's inverse, the integral only on a still reference
-  near its target: :class:`VelocityPID`), ``"fl"`` (feedback
-  linearisation on the observer's force estimate, the plant file's dry friction
-  fed forward at the reference's velocity: :class:`~.feedback_linearizing.
-  FeedbackLinearizing`'s ``friction``) or ``"nmpc"`` (RTI NMPC whose model keeps
-  the plant's dry friction, smooth).
+  and the model friction's rate fed forward through that model's inverse, the
+  integral only on a still reference near its target: :class:`VelocityPID`),
+  ``"fl"`` (feedback linearisation on the observer's force estimate, the plant
+  file's dry friction fed forward at the reference's velocity:
+  :class:`~.feedback_linearizing.FeedbackLinearizing`'s ``friction``) or
+  ``"nmpc"`` (RTI NMPC whose model keeps the plant's dry friction, smooth). PID
+  and FL drive a stuck piston that the reference moves on to the static friction
+  (:func:`~.feedback_linearizing.breakaway`): the observer's force estimate of a
+  stuck piston is only the force that holds it.
 
 The hold compares the reference clipped to the stroke the law may use (the NMPC's
 stroke margin) and, given the reference in advance, hands over to the law
@@ -32,7 +35,8 @@ within :func:`hold_range`.
 
 Given the whole reference in advance (``reference=``), a step is turned into a
 feasible smooth trajectory (:func:`workbench.references.smooth`, limits from
-:func:`axis_limits`) and FL and NMPC track it with feedforward of its derivatives;
+:func:`axis_limits`: the valve's flow, or the lines' if they pass less) and PID, FL
+and NMPC track it with feedforward of its derivatives;
 without it they work on the reference sample by sample (FL through its reference
 model, NMPC extrapolating the current rate).
 
@@ -59,7 +63,8 @@ from .compensation import Compensated, DeadbandInverse, FrictionModel
 from .hold import hold_for_plant
 from .observer import Observed, kalman_observer
 
-__all__ = ["design", "axis_limits", "AxisLimits", "KINDS", "VelocityPID"]
+__all__ = ["design", "axis_limits", "AxisLimits", "KINDS", "VelocityPID", "line_flow",
+           "breakaway_jump"]
 
 KINDS = ("pid", "fl", "nmpc")
 #: m/s: speed below which a piston in the lock band is held by closing the valve
@@ -90,8 +95,9 @@ class AxisLimits:
 def axis_limits(plant, margin: float = TRAJECTORY_MARGIN) -> AxisLimits:
     """Trajectory limits from the valve's flow and the pressure range (SI).
 
-    * speed: the fully open edge's choked mass flow q = C p_s rho0 sqrt(T0/T) fills
-      chamber a at the mid pressure p_m = (p_s + p_atm)/2 with q r T / p_m of
+    * speed: the fully open edge's choked mass flow q = C p_s rho0 sqrt(T0/T)
+      (with lines, at most what the line passes from p_s to p_m: :func:`line_flow`)
+      fills chamber a at the mid pressure p_m = (p_s + p_atm)/2 with q r T / p_m of
       volume per second: v = q r T / (p_m A_a);
     * acceleration: the full pressure difference over the piston less the static
       friction, ((p_s - p_atm) A_a - F_s) / m;
@@ -110,12 +116,50 @@ def axis_limits(plant, margin: float = TRAJECTORY_MARGIN) -> AxisLimits:
     k = float(prm["gas.polytropic_index"])
     q = float(prm["valve.sonic_conductance"]) * p_s * _RHO0 * math.sqrt(_T0 / T)
     p_m = 0.5 * (p_s + p_atm)
+    if "line_dynamics" in set(plant.effects):
+        q = min(q, line_flow(float(prm["lines.length"]), float(prm["lines.diameter"]), p_s, p_m, T))
     speed = q * _R * T / (p_m * A)
     f_s = float(prm.get("friction.static") or prm.get("friction.coulomb") or 0.0)
     acc = max((p_s - p_atm) * A - f_s, 0.1 * (p_s - p_atm) * A) / m
     v_mid = A * 0.5 * plant.stroke + float(prm["cylinder.dead_volume_a"])
     jerk = k * _R * T * q * A / v_mid / m
     return AxisLimits(margin * speed, margin * acc, margin * jerk)
+
+
+def line_flow(length: float, diameter: float, p_in: float, p_out: float,
+              temperature: float, steps: int = 200) -> float:
+    """Steady mass flow (kg/s) through a line from ``p_in`` to ``p_out`` (Pa).
+
+    The friction drop of the plant's line model (:func:`workbench.physics.line.
+    pressure_drop`: laminar plus Blasius) integrated along the line in ``steps``
+    pieces at the local density, the flow found by bisection. A 1 m line of 4 mm
+    bore from 6 bar into 3.5 bar passes 10.7 g/s, a quarter of what the precision
+    rig's valve passes fully open (44 g/s): with lines it is the line that limits
+    how fast a chamber fills (trajectories planned on the valve alone were four
+    times too fast for the precision rig and the piston stalled half-way through a
+    10 mm step).
+    """
+    from ..physics.line import pressure_drop
+    if not (length > 0 and diameter > 0 and p_in > p_out > 0):
+        raise InputError("line_flow needs a line length and diameter > 0 m and "
+                         f"p_in > p_out > 0 Pa, got {length!r}, {diameter!r}, {p_in!r}, {p_out!r}")
+    seg = length / steps
+
+    def end_pressure(q: float) -> float:
+        p = p_in
+        for _ in range(steps):
+            p -= float(pressure_drop(q, p, diameter, seg, temperature))
+            if p <= 0.0:
+                return -math.inf
+        return p
+
+    lo, hi = 0.0, p_in * math.pi / 4.0 * diameter ** 2 / math.sqrt(_R * temperature)  # choked
+    while end_pressure(hi) > p_out:
+        hi *= 2.0
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if end_pressure(mid) > p_out else (lo, mid)
+    return lo
 
 
 @dataclass(frozen=True)
@@ -144,6 +188,14 @@ class VelocityPID:
     * it is held while |e| is below ``integral_band`` (m; half a quantum: below it
       the sensor cannot tell the error, and integrating noise into a stuck piston
       makes it hunt) and while the command saturates.
+
+    Friction (``friction``, the plant file's :class:`~.compensation.FrictionModel`;
+    None: off): in the reduced model the command sets the force's rate
+    (``force_rate`` = m kv w0^2, N/s per V), so the model friction's rate at the
+    reference is fed forward, and a stuck piston that must move is driven to the
+    static friction (:meth:`_friction`; ``mass`` kg, ``viscous`` N s/m for the
+    force from the observer's estimates, ``force_time`` s its time constant).
+    ``loop_gain`` (1/s): kp kv, for reference.
     """
 
     kp: float
@@ -159,12 +211,48 @@ class VelocityPID:
     ff: tuple = (0.0, 0.0, 0.0)
     integral_zone: float = math.inf
     integral_limit: float = math.inf
+    friction: Any = None
+    force_rate: float = 0.0
+    mass: float = 0.0
+    viscous: float = 0.0
+    loop_gain: float = 0.0
+    force_time: float = 0.0
 
     kind = "pid"
     needs = ("x", "v")
 
     def reset(self):
-        return (0.0, None, 0.0)
+        return (0.0, None, 0.0, None)
+
+    def _friction(self, brk, rs: float, r1: float, r2: float, y: dict):
+        """(command V, break-away state) of the friction compensation.
+
+        The law works on the reduced model, in which the valve command sets the
+        force's rate (``force_rate`` N/s per V, m kv w0^2): a force the model lacks
+        is compensated by its rate. (1) Given the preview, the plant file's friction
+        at the reference's velocity changes at F'(r1) r2: fed forward as that rate.
+        (2) A stuck piston that must move (:func:`~.feedback_linearizing.breakaway`)
+        needs the static friction in that direction: the force, known from the
+        observer (m a + beta v + d), is driven to it with the reduced model's time
+        constant 1/w0 (``force_time``) until the piston moves. Without it the
+        proportional term builds the force at kp e (4 mV per mm on the precision
+        rig): a 10 mm step stalled half-way for 170 ms, then broke away 1.9 mm past
+        its target.
+        """
+        from .feedback_linearizing import breakaway
+        fr, c = self.friction, self.force_rate
+        if fr is None or c <= 0 or self.force_time <= 0 or "d" not in y or "a" not in y:
+            return 0.0, None
+        h = 1e-3 * fr.stribeck_velocity
+        u = (float(fr(r1 + h)) - float(fr(r1 - h))) / (2 * h) * r2 / c
+        x, v = float(y["x"]), float(y["v"])
+        brk = breakaway(brk, r1, v,
+                        float(y.get("x_measured", x)), fr.stribeck_velocity)
+        if brk is not None:
+            force = self.mass * float(y["a"]) + self.viscous * v + float(y["d"])
+            want = brk[0] * fr.static + self.mass * r2 + self.viscous * r1
+            u += (want - force) / (c * self.force_time)
+        return u, brk
 
     def held(self, new, entry, opening: float):
         """State while a hold commands the valve: the integral frozen at ``entry``'s
@@ -172,7 +260,7 @@ class VelocityPID:
         return (new[0] if entry is None else entry[0], *new[1:])
 
     def update(self, state, r: float, y: dict):
-        integ, r_prev, t = state
+        integ, r_prev, t, brk = (*state, None)[:4]
         T = self.sample_time
         ff = self.ff
         if self.preview is not None:
@@ -186,6 +274,8 @@ class VelocityPID:
         a = float(y.get("a", 0.0)) if self.ka else 0.0
         u = (self.u_center + self.kp * e + self.kd * (r1 - float(y["v"])) + self.ka * (r2 - a)
              + ff[0] * r1 + ff[1] * r2 + ff[2] * r3 + self.ki * integ)
+        u_f, brk = self._friction(brk, rs, r1, r2 if self.preview is not None else 0.0, y)
+        u += u_f
         still = r_prev is not None and abs(r - r_prev) <= 1e-12 and r1 == 0.0
         if still and self.integral_band < abs(e) <= self.integral_zone:
             cap = self.integral_limit / self.ki if self.ki > 0 else math.inf
@@ -193,7 +283,7 @@ class VelocityPID:
             u_try = u + self.ki * (new - integ)
             if self.u_min < u_try < self.u_max:
                 integ, u = new, u_try
-        return (integ, r, t + T), float(u)
+        return (integ, r, t + T, brk), float(u)
 
 
 def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = None,
@@ -254,7 +344,8 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
         lock = "dry_friction" in has              # only friction holds a locked piston
     band = min(0.5 * q, 0.5 * ss_limit) if lock else 0.0
     hold = (hold_for_plant(plant, T, 2.0 * band, pressure_noise, lock_speed=LOCK_SPEED,
-                           range=hold_range(law, dead)) if lock else None)
+                           range=hold_range(law, dead, plant if kind == "fl" else None))
+            if lock else None)
     margin = float(getattr(law, "stroke_margin", 0.0))
     comp = Compensated(law, deadband=dead, lock_band=band, release_band=4.0 * band,
                        lock_speed=LOCK_SPEED if lock else 0.0, hold=hold,
@@ -263,9 +354,23 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
     return Observed(comp, obs, plant, preview=preview)
 
 
-def hold_range(law, dead) -> float:
+def hold_range(law, dead, plant=None) -> float:
     """|r - x| (m) up to which the hold takes a stuck piston over: 2 mm, or twice the
-    position law's own dead zone if that is wider.
+    position law's own dead zone, or (given the plant: :func:`design` does for FL)
+    the break-away jump :func:`breakaway_jump`, whichever is widest.
+
+    A law that moves a stuck piston by raising its force from the position error
+    must reach the static friction before anything moves, and the excess over the
+    sliding friction then carries the piston on: within that jump of the target
+    it cannot land without passing it (FL on the precision rig: stuck 2.4 mm short
+    after a 10 mm step, broke away 280 ms later and stopped 3.1 mm past, the next
+    break-away as far back: a stick-slip cycle just outside a 2 mm range; precision
+    profile --quick seeds 0/1/2, overshoot 58/58/48 % -> 2.9/10.9/4.7 %, steady
+    state worst 2.9/2.6/2.5 -> 0.16/0.03/0.20 mm). Not for the PID: its range is
+    already twice its dead zone (4.6 mm), and from 5-14 mm the hold's pulses did
+    worse than the PID with its break-away (same seeds: steady state worst
+    0.35/0.06/0.10 -> 1.2/1.7/1.4 mm); not for the NMPC, which plans the
+    break-away with the friction in its model.
 
     A proportional law whose error opens the valve less than the deadband inverse's
     residual overlap (its straight piece, ``dead.width`` of the deadband) cannot move
@@ -277,7 +382,33 @@ def hold_range(law, dead) -> float:
     kp = getattr(law, "kp", None)
     residual = dead.width * dead.deadband * dead.span
     zone = residual / kp if kp else 0.0
-    return max(2e-3, 2.0 * zone)
+    jump = 0.0 if plant is None or getattr(law, "horizon", None) is not None else breakaway_jump(plant)
+    return max(2e-3, 2.0 * zone, jump)
+
+
+def breakaway_jump(plant) -> float:
+    """How far (m) a piston breaking away at the static friction slides on the
+    closed chambers' gas spring: 2 (F_s - F_c) / k, with k = n p_m (A_a^2 / V_a +
+    A_b^2 / V_b) at mid-stroke (p_m the mid pressure (p_s + p_atm) / 2, the
+    volumes with their dead volume and line); 0 without dry friction. The
+    undamped spring released with the excess F_s - F_c swings to twice its
+    equilibrium (precision rig: 10 N over 1.7 kN/m, 11.8 mm).
+    """
+    prm = plant.params
+    if "dry_friction" not in set(plant.effects):
+        return 0.0
+    fc = float(prm.get("friction.coulomb") or 0.0)
+    fs = float(prm.get("friction.static") or fc)
+    line = 0.0
+    if "line_dynamics" in set(plant.effects):
+        line = float(prm["lines.length"]) * math.pi / 4 * float(prm["lines.diameter"]) ** 2
+    p_m = 0.5 * (float(prm["supply.pressure"]) + float(prm["gas.atmospheric_pressure"]))
+    half = 0.5 * plant.stroke
+    a_a, a_b = float(plant.area_a), float(plant.area_b)
+    k = float(prm["gas.polytropic_index"]) * p_m * (
+        a_a ** 2 / (a_a * half + float(prm["cylinder.dead_volume_a"]) + line)
+        + a_b ** 2 / (a_b * half + float(prm["cylinder.dead_volume_b"]) + line))
+    return 2.0 * max(fs - fc, 0.0) / k
 
 
 def release_lead(law, hold, T: float) -> float:
@@ -392,13 +523,17 @@ def _pid(plant, T: float, preview, q: float) -> VelocityPID:
     tau = ((red.zeta + math.sqrt(red.zeta ** 2 - 1.0)) / red.w0 if red.zeta > 1.0
            else 1.0 / red.w0)
     limit = INTEGRAL_SHARE * float(prm["valve.command_span"])
+    m = float(prm["load.mass"])
     return VelocityPID(kp=kp, kd=kp * tau, ki=0.1 * k0 * kp, sample_time=T,
                        u_center=float(prm["valve.command_center"]),
                        u_min=float(prm["valve.command_min"]),
                        u_max=float(prm["valve.command_max"]),
                        integral_band=0.5 * q, preview=preview,
                        ff=(1.0 / kv, 2.0 * red.zeta / (red.w0 * kv), 1.0 / (kv * w2)),
-                       integral_zone=limit / kp, integral_limit=limit)
+                       integral_zone=limit / kp, integral_limit=limit,
+                       friction=FrictionModel.from_plant(plant), force_rate=m * kv * w2,
+                       mass=m, viscous=float(prm["load.viscous_friction"]), loop_gain=k0,
+                       force_time=1.0 / red.w0)
 
 
 def _fl_bandwidth(T: float) -> float:

@@ -209,10 +209,15 @@ def _hold_text(comp) -> str:
 def _friction_text(law) -> str:
     """How the law uses the plant file's dry friction, in words."""
     fr = getattr(law, "friction", None)
+    if fr is not None and getattr(law, "force_rate", None):
+        return (f"plant file's friction (Coulomb {fr.coulomb:g} N, static {fr.static:g} N): "
+                "its rate at the reference's velocity through the reduced model's inverse; a "
+                "stuck piston that must move driven to the static friction")
     if fr is not None:
         return (f"plant file's friction (Coulomb {fr.coulomb:g} N, static {fr.static:g} N) at "
                 f"the reference's velocity, handed over to the force estimate in "
-                f"{law.friction_lag * 1e3:.1f} ms")
+                f"{law.friction_lag * 1e3:.1f} ms; a stuck piston that must move: the "
+                "static friction")
     model = getattr(law, "model", None)
     if model is not None and "dry_friction" in getattr(model, "effects", ()):
         return "in the prediction model (smooth form)"
