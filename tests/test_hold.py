@@ -89,6 +89,24 @@ def test_pulse_strength_grows_without_a_move_and_bisects_after_an_overshoot():
     assert h._next(s2, +1.0) == pytest.approx(math.sqrt(0.2 * 0.3))
 
 
+@pytest.mark.parametrize("jump, pulses_again", [(2, False), (1, True)])
+def test_no_pulse_when_the_smallest_jump_cannot_land_closer(jump, pulses_again):
+    h = _hold()
+    r = 0.25 + 3 * Q                                # three quanta above the piston
+    s = {**h.reset(), "lo+": 0.2, "hi+": 0.28}      # bracket narrower than one x grow
+    s, out = _run(h, s, r, [_y(0.25)] * 20)         # a pulse at the threshold ...
+    assert max(u for u in out if u is not None) == pytest.approx(math.sqrt(0.2 * 0.28))
+    assert s["pulses"] == 1
+    # ... jumps the piston `jump` quanta towards r and it sticks again
+    s, out = _run(h, s, r, [_y(0.25 + jump * Q)] * 60)
+    assert s["min+"] == jump
+    # 2 quanta: 1 quantum left, any jump of >= 2 ends >= 1 quantum from r, no better:
+    # the valve stays closed; 1 quantum: 2 left, the next pulse can land closer
+    assert (s["pulses"] > 1) is pulses_again
+    if not pulses_again:
+        assert set(out[h.dwell_samples:]) == {0.0} and s["mode"] == "ready"
+
+
 def test_beyond_full_opening_a_pulse_gets_longer():
     h = _hold(width=3)
     assert h.pulse_shape(0.5) == (3, 0.5)

@@ -30,7 +30,7 @@ from a hold: the hold leaves the net force near zero and the NMPC must first bui
 static friction, 1.0-1.4 mm in the first 0.1 s, seed 0; the reversals 0.8 mm), and the
 perturbed rig (static friction 37.5 N: a pulse that breaks it away moves it 0.3-1 mm,
 several quanta; hold 3 hunts in pulses, 51 command changes in its second half, and
-ends 1.1 mm off). Strict xfails record both.
+ends 1.1 mm off). Strict xfails recorded both (removed in session 9, below).
 
 Session 8 (branch h14f): the hold hands over to the NMPC one horizon before the
 reference leaves its quantum (a preview), compares the reference clipped to the NMPC's
@@ -41,6 +41,29 @@ start), sine 1.00 mm; seed 4 the 1.8 s step's hold lands late (strict xfail belo
 seed 0's sine still above 1 mm on this profile (strict xfail), below it on the
 precision profile (designs/precision_positioning.py --quick: 0.99 mm).
 
+Session 9 (branch h14g): the designed NMPC's velocity tolerance doubled
+(mpc.RIG_VELOCITY_TOLERANCE: the 26 Hz command oscillation on the lined rig), and the
+hold stops pulsing when the smallest break-away jump a pulse at the threshold has made
+is at least twice the distance left (hold.HoldPositioner.no_better). Measured on this
+profile (27be80b -> now, worst steady state after the steps / worst sine error / holds
+free of a limit cycle / command activity on the sine, the std of test_nmpc_command_
+activity_on_the_sine_is_bounded):
+
+  seed 0  0.078 / 0.79 mm / yes / 0.69 V  ->  0.023 / 0.52 mm / yes / 0.40 V
+  seed 1  0.060 / 0.84 mm / yes / 0.71 V  ->  0.090 / 0.91 mm / yes / 0.38 V
+  seed 2  0.098 / 0.51 mm / NO  / 0.75 V  ->  0.070 / 0.55 mm / yes / 0.39 V
+  seed 3  0.073 / 0.87 mm / yes / 0.71 V  ->  0.097 / 0.66 mm / yes / 0.42 V
+  seed 4  0.023 / 0.66 mm / yes / 0.72 V  ->  0.081 / 0.66 mm / yes / 0.41 V
+  perturbed 0.202 / 1.52 mm / NO / 0.67 V ->  0.096 / 1.57 mm / yes / 0.39 V
+
+(seed 2 here, seed 4 in session 8's runs: which seed's hold lands late changes with
+the machine). Not a property of the rig family: friction 1.2x / 1.3x / 1.7x (mass
++10 %) still end holds off and pulsing (steady 0.48 / 0.33 / 0.47 mm, 27be80b 0.08 /
+0.12 / 0.48 mm): with F_s - F_c of 12-20 N a pulse that just breaks the piston away
+jumps it 1-17 quanta, within a 1 % change of its strength (the bump through 1 m lines
+stays above F_c for several ms), so where a stop lands is a lottery; the stop rule
+ends the pulsing but cannot make the jump smaller.
+
 Tried and not kept (same profile): a hold that only closes the valve (a piston stuck
 under -20 to -33 N, above Coulomb friction, slid 6 mm with the valve closed); pulses
 whose reverse half is 1.5-2x the forward one (the net reverse force broke the piston
@@ -49,7 +72,11 @@ rig's lumped line the force rings +-20 N with the valve closed: 300-900 command
 changes per hold); the law's force estimate frozen at its value when the hold took over
 instead of set to zero (seed 0 sine 1.35 mm, seed 4 0.173 mm steady state); handing back
 to the NMPC one horizon before the reference moves (40 command changes in every hold's
-second half, sine not better).
+second half, sine not better); session 9: the pulse bracket on the measured peak of each
+pulse's net-force bump instead of its strength, the next pulse sized by the secant
+towards the file's F_s (perturbed rig: the bump saturates near 33 N for strengths
+0.5-1 and rises again once the pulse lengthens, so the secant overshot: jumps of
+20-165 quanta).
 """
 
 from __future__ import annotations
@@ -111,16 +138,34 @@ def test_nmpc_median_computation_below_1ms(nominal):
     assert nominal.median_update_ms < 1.0
 
 
+def _command_activity(ev, sections):
+    """Std (V) of the command minus its 50 ms moving mean over the time ``sections``."""
+    tr = ev.validation.trajectory
+    t, u = tr.time, np.asarray(tr["u"], dtype=float).ravel()
+    hf = u - np.convolve(u, np.ones(25) / 25, mode="same")
+    sel = np.zeros(t.shape, dtype=bool)
+    for a, b in sections:
+        sel |= (t > a) & (t < b)
+    return float(np.std(hf[sel]))
+
+
 def test_nmpc_command_does_not_chatter(nominal):
     # high-frequency part of the command (minus its 50 ms moving mean) on the moving
     # sections (the ramp of the first step and the sine): 1.18 V with the deadbeat
     # force estimate, 0.64 V filtered over DISTURBANCE_TIME (seed 0; 0.25 V on the
-    # rig without its 1 m lines: the rest is the lines' delay, not in the model)
-    tr = nominal.validation.trajectory
-    t, u = tr.time, np.asarray(tr["u"], dtype=float)
-    hf = u - np.convolve(u, np.ones(25) / 25, mode="same")
-    moving = ((t > 0.35) & (t < 1.2)) | ((t > 4.9) & (t < 6.7))
-    assert np.std(hf[moving]) < 0.9
+    # rig without its 1 m lines: the rest is the lines' delay, not in the model),
+    # 0.33 V with mpc.RIG_VELOCITY_TOLERANCE
+    assert _command_activity(nominal, [(0.35, 1.2), (4.9, 6.7)]) < 0.5
+
+
+def test_nmpc_command_activity_on_the_sine_is_bounded(nominal, other_seeds):
+    # issue 14 item 4 (no chatter): on the sine the command carried a 26 Hz
+    # oscillation, 0.69-0.75 V std of the part above the 50 ms moving mean (seeds
+    # 0-4, velocity tolerance 0.05 m/s), 0.38-0.42 V with RIG_VELOCITY_TOLERANCE; the
+    # bound halfway. The sine must not be lost for it (the must-show's 1 mm).
+    for seed, ev in {0: nominal, **other_seeds}.items():
+        assert _command_activity(ev, [(4.9, 6.7)]) < 0.55, seed
+        assert ev.validation.metrics.sine_error_max <= 1e-3, seed
 
 
 def _steps(ev):
@@ -138,7 +183,8 @@ def test_other_noise_seeds_settle_within_one_quantum(other_seeds):
         # the must-shows' hold part: within one quantum after every step (over the
         # hold's end less the hand-over to the next move: evaluation.hold_evidence)
         assert max(h["steady_state_error"] for h in _steps(ev)) <= ev.quantum, (seed, ev.holds)
-        # regression pin, not the must-show: measured 0.65-1.21 mm
+        # regression pin, not the must-show: measured 0.65-1.21 mm (0.52-0.91 mm
+        # with RIG_VELOCITY_TOLERANCE; the must-show's 1 mm in the sine test below)
         assert ev.validation.metrics.sine_error_max <= 1.6e-3, seed
 
 
@@ -165,9 +211,6 @@ def test_perturbed_rig_ends_at_rest(perturbed):
     assert np.isfinite(ev.validation.metrics.sine_error_max)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 14 open: on the perturbed rig (static friction "
-                   "37.5 N) the third hold ends 1.08 mm off after pulsing through its second "
-                   "half (51 command changes)")
 def test_perturbed_rig_settles_without_limit_cycle(perturbed):
     ev = perturbed
     assert max(h["steady_state_error"] for h in _steps(ev)) <= ev.quantum

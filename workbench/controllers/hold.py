@@ -59,11 +59,15 @@ and the force steady again: there is no continuous position feedback to sustain 
 oscillation. A pulse that brings the piston closer to the target's bin shortens the
 distance by at least a quantum (at most ``range`` / q of them); after ``max_pulses``
 others in one hold the hold stops pulsing (termination by construction; the piston is
-then held where it is, off the quantum, and the steady-state error says so). A bracket that keeps overshooting narrows
-geometrically. What the bisection cannot remove is the smallest move a bump that
-breaks the piston away makes: on the precision rig (F_s - F_c = 10 N, 1 m lines)
-about 0.1-0.3 mm, one to three quanta, so a stop is not certain to land in the target's
-bin at the first pulses; the bracket makes the outcomes converge, not each pulse.
+then held where it is, off the quantum, and the steady-state error says so). Nor does
+it pulse when no pulse can land closer (:meth:`HoldPositioner.no_better`): the
+smallest jump a pulse at the threshold has made (bracket narrower than one ``grow``)
+is the rig's shortest move, and a piston within half of it stays. A bracket that
+keeps overshooting narrows geometrically. What the bisection cannot remove is the
+smallest move a bump that breaks the piston away makes: on the precision rig (F_s -
+F_c = 10 N, 1 m lines) about 0.1-0.3 mm, one to three quanta, so a stop is not
+certain to land in the target's bin at the first pulses; the bracket makes the
+outcomes converge, not each pulse.
 
 The law underneath: while the hold commands, :func:`~.compensation.held` keeps the
 law's integral or force estimate from winding up (the NMPC's force estimate is set to
@@ -261,8 +265,8 @@ class HoldPositioner:
             if s.get("pending"):
                 self._adapt(s, x_m, e)
             s["mode"] = LOCKED if in_bin else READY
-            if s.get("tries", 0) >= self.max_pulses:     # given up: held where it is
-                s["unloading"] = False
+            if s.get("tries", 0) >= self.max_pulses or self.no_better(s, e):
+                s["unloading"] = False                   # given up: held where it is
                 return s, 0.0
             if not in_bin and not s.get("unloading") and (self.force_rate <= 0
                                                           or abs(s["fm"]) <= self.force_band):
@@ -293,6 +297,18 @@ class HoldPositioner:
         # at least MIN_OPENING: smaller openings stay inside a valve's residual overlap
         return -math.copysign(min(1.0, max(abs(w), MIN_OPENING)), w)
 
+    def no_better(self, s: dict, e: float) -> bool:
+        """True when no pulse can be expected to land closer than ``e`` (m, r - x):
+        the smallest move a pulse towards r has made on this rig (a break-away jump,
+        kept per direction over all holds), m, is at least twice |e|, so any move
+        ends at least m - |e| >= |e| from r. The jump's size is the rig's (the excess
+        F_s - F_c over the mass, the lines' delay), not in the plant file: on the
+        precision rig with 1.5x friction no pulse moved the piston less than 2 quanta,
+        and pulses at 1.5 quanta from the target hopped it back and forth over its bin
+        through the whole hold (30 command changes in the hold's second half)."""
+        m = s.get("min+" if e > 0 else "min-")
+        return m is not None and abs(e) <= 0.5 * m * self.quantum * (1 + 1e-9)
+
     def _adapt(self, s: dict, x_m: float, e: float) -> None:
         """Strength of the next pulse from the move this one made (quanta towards r).
 
@@ -310,6 +326,8 @@ class HoldPositioner:
         lo, hi = s.get(key, 0.0), s.get("hi" + key[2], math.inf)
         moved = (x_m - s["x0"]) * s["dir"] / self.quantum
         a = s["a"]
+        if moved >= 0.5 and a <= lo * math.sqrt(self.grow):   # a jump at the threshold
+            s["min" + key[2]] = min(s.get("min" + key[2], math.inf), round(moved))
         if moved < 0.5:
             lo = max(lo, a)
         elif e * s["dir"] < -0.5 * self.quantum:          # past the target's bin
