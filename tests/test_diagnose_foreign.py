@@ -41,10 +41,9 @@ def _small_rig_recording(plant_file, overrides, duration=8.0, seed=3):
     return Recording.from_arrays(t, metadata={"sample_time": 1e-3}, **cols)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12 open: the engine's step refinement that "
-                   "removed the invented parameter_error (branch h12f, dc82373) was not merged: "
-                   "with it the foreign dry-friction case fitted the static friction 7.7 % low "
-                   "and diagnosis.json's values differed from details.json's")
+@pytest.mark.xfail(strict=True, reason="issue 12 open: the engine's step refinement is decided "
+                   "once per predictor now (predict.settle_refinement) but is off by default "
+                   "(predict.REFINE_STEPS: on, it named spurious effects on the bench case)")
 def test_small_rig_deadband_without_invented_nominal_errors(tmp_path):
     """Deadband 0.06 concealed, plant file exact: the deadband is named within 2 % and
     no parameter_error is (on main's engine: deadband 0.0600 and a parameter_error of

@@ -21,8 +21,20 @@ one step per recorded sample (or ``substeps``), by :func:`workbench.integrate.ro
 with :data:`workbench.integrate.ROS2`. ROS2 keeps its order 2 for any
 approximation W of the Jacobian, which is used here: positive diagonal entries of
 the Jacobian (the negative damping of a Stribeck friction curve) are left out of W
-so that a falling friction curve cannot make the linear solve singular. The
-per-sample function (reset + controller + step) is accumulated over a chunk of
+so that a falling friction curve cannot make the linear solve singular.
+
+Step refinement: a sample whose input row ``refine`` is 1 is stepped with
+:data:`REFINE` times smaller steps. The caller decides those samples once per
+predictor (:func:`.predict.settle_refinement`: the recording's friction events and the
+steps the nominal replay flags), never per replay: a decision taken from each replay's
+own state switches steps between 1 and :data:`REFINE` sub-steps as the parameters move,
+so the cost jumps and two replays of nearly equal parameters are stepped differently.
+Each replay reports, per sample, whether its plain step could not be accurate (output
+row ``inexact``: :data:`LOCAL_TOL`, :data:`EXPLICIT_LIMIT`, a friction switch inside
+the step), which is what the decision is made from. The diagnosis leaves it off for
+now (:data:`.predict.REFINE_STEPS`, where the measurements are). The per-sample
+function (reset +
+controller + step) is accumulated over a chunk of
 samples (``mapaccum``) and compiled to C once per plant structure and controller
 (:func:`workbench.integrate.jit.compiled`, cached by source hash); Python loops over the
 chunks. One replay of 24 s at 1 kHz of the 4-state plant takes about 0.1 s.
@@ -50,14 +62,17 @@ from ..plant import Plant
 __all__ = ["Engine", "EngineInputs", "OUTPUTS", "INPUT_ROWS"]
 
 #: Rows of the engine's output, per sample: simulated x, p_a, p_b (at the sample,
-#: after any re-anchoring), command used, and the model rates dv/dt, dp_a/dt, dp_b/dt
-#: at that state.
+#: after any re-anchoring), command used, and (``rates``) the model rates dv/dt,
+#: dp_a/dt, dp_b/dt at that state; the last row is always ``inexact`` (1 where the
+#: sample's plain step could not be accurate, see the module docstring).
 OUTPUTS = ("x", "p_a", "p_b", "u", "dv", "dp_a", "dp_b")
 
 #: Rows of the per-sample input.
 INPUT_ROWS = ("r", "u_rec", "control_instant", "closed_loop", "anchor", "anchor_p",
-              "anchor_hidden", "x_m", "v_m", "p_a_m", "p_b_m", "e_prev_m", "use_p_s", "p_s_m")
-# use_p_s, p_s_m: where use_p_s is 1 the supply pressure is the recorded p_s_m (Pa)
+              "anchor_hidden", "x_m", "v_m", "p_a_m", "p_b_m", "e_prev_m", "use_p_s", "p_s_m",
+              "refine")
+# use_p_s, p_s_m: where use_p_s is 1 the supply pressure is the recorded p_s_m (Pa);
+# refine: 1 where the sample's step is taken with REFINE times smaller steps
 
 #: More states than this: numeric linear solves (a symbolic inverse grows too big).
 _SX_LIMIT = 16
@@ -65,9 +80,28 @@ _SX_LIMIT = 16
 #: Samples per compiled chunk.
 CHUNK = 1000
 
-#: A sample whose step leaves the physical states is redone with this many times
-#: smaller steps.
+#: A sample whose step leaves the physical states, or whose step says it cannot be
+#: accurate (:data:`EXPLICIT_LIMIT`, :data:`LOCAL_TOL`, friction events), is redone
+#: with this many times smaller steps.
 REFINE = 8
+#: Largest h x (growth rate) of a mode the step treats explicitly: W leaves out the
+#: positive diagonal of the Jacobian (the negative damping of a falling Stribeck curve,
+#: up to 0.86 (F_s - F_c) / (m v_s): 480 1/s for 20/28 N, 1.2 kg, v_s = 12 mm/s), so
+#: that mode is integrated as by an explicit method, accurate only while h x rate is
+#: small (at 0.4 the one-step growth 1 + 0.4 + 0.08 of a second-order update is 0.8 %
+#: short of e^0.4; at 0.95, a 2 ms step at that Stribeck peak, 5 %: one such step at a
+#: break-away moved the piston 67 um less than the converged solution). A step over
+#: the limit is redone with :data:`REFINE` times smaller steps.
+EXPLICIT_LIMIT = 0.4
+#: |C3| of ROS2's local error C3 h^3 J^2 f (:func:`_error_too_large`).
+ROS2_C3 = 1.0 / 6.0 - (4.0 * (1.0 + 0.5 ** 0.5) ** 3 - (1.0 + 2.0 ** 0.5) * 3.0
+                       * (1.0 + 0.5 ** 0.5) ** 2)
+#: Local error a step may leave in the position (fraction of the stroke) and in the
+#: chamber pressures (fraction of the supply pressure) before it is redone with
+#: :data:`REFINE` sub-steps: 1e-5 of the stroke is below the least significant bit of
+#: a 16-bit position sensor over the stroke (1.5e-5), 1e-4 of a 6 bar supply (60 Pa) a
+#: quarter of a 12-bit pressure sensor's over 0-10 bar (244 Pa).
+LOCAL_TOL = (1e-5, 1e-4)
 #: Physical bounds of any pressure state: above P_FLOOR x atmospheric, below
 #: P_CEIL x supply pressure.
 P_FLOOR = 0.02
@@ -89,7 +123,10 @@ class EngineInputs:
 
 def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step"
                ) -> ca.Function:
-    """z_{k+1} = ROS2(z_k, u, p): one step of h/substeps (:func:`_repeated` chains them).
+    """(z_{k+1}, inexact) = ROS2(z_k, u, p): one step of h/substeps (:func:`_repeated`
+    chains them); ``inexact`` is 1 where the step cannot be accurate
+    (:data:`EXPLICIT_LIMIT`, and the friction events below), so that
+    :func:`_guarded_step` redoes it with smaller steps.
 
     Dry friction is stepped on its own (the Karnopp switch of the plant's ``f`` would
     put the two stages of a step on different branches): during a step the friction
@@ -97,6 +134,12 @@ def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step
     rest); if the velocity crosses zero within the step and the driving force at rest
     is within the static level, the piston stops there (time-stepping stick), and a
     piston at rest stays at rest until the driving force exceeds the static level.
+
+    Where this is only first-order accurate, the step says so (``inexact``): the
+    velocity reverses within it (the friction keeps its start direction past the
+    reversal), or a stuck piston's driving force exceeds the static level by the step's
+    end (the break-away happens within it, not at its start). Both are discontinuities
+    of the friction law inside the step, where a one-step method loses its order.
     """
     nx = len(plant.states)
     sx = nx <= _SX_LIMIT
@@ -141,6 +184,9 @@ def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step
             return plant.f(zz, u, p)
     fz = f_of(zk)
     J = ca.jacobian(fz, zk)
+    growth = ca.mmax(ca.diag(J))         # 1/s: fastest growing mode, left explicit in W
+    inexact = ca.logic_or(growth * dt > EXPLICIT_LIMIT,
+                          _error_too_large(plant, J, fz, dt))
     J = J - ca.diag(ca.fmax(ca.diag(J), 0.0))
 
     def solve(M, rhs):
@@ -155,17 +201,43 @@ def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step
                               for i in range(nx)])
         crossed = ca.logic_and(v0 != 0, v0 * v1 <= 0)
         held = ca.fabs(drive(z_rest)) <= fs
+        breaks = ca.logic_and(stuck, ca.logic_not(held))
+        inexact = ca.logic_or(inexact, ca.logic_or(breaks, ca.logic_and(crossed,
+                                                                        ca.logic_not(held))))
         zn = ca.if_else(ca.logic_or(stuck, ca.logic_and(crossed, held)), z_rest, zn)
-    return ca.Function(name, [z, u, p], [zn])
+    return ca.Function(name, [z, u, p], [zn, inexact])
+
+
+def _error_too_large(plant: Plant, J, fz, dt: float):
+    """1 where the step's leading local error in x, p_a or p_b exceeds :data:`LOCAL_TOL`.
+
+    ROS2's local error is C3 h^3 J^2 f + O(h^4) on the linear part of the dynamics
+    (its stability function R(z) = (1 - (2 gamma - 1) z) / (1 - gamma z)^2 has the z^3
+    coefficient -1.207 where e^z has 1/6: C3 = -1.374); the position's is all of it,
+    since x' = v is linear (its h^3 term is the jerk, (J f)_v). The jerk is large where
+    the valve opens on the chambers (pressure rates of 1e7 Pa/s at a command step):
+    one 2 ms step then moves the piston 52 um backwards relative to the converged
+    solution (estimated 86 um), against 1.1 um with eight sub-steps.
+    """
+    prm = plant.params
+    tol = {"x": LOCAL_TOL[0] * plant.stroke,
+           "p_a": LOCAL_TOL[1] * prm["supply.pressure"],
+           "p_b": LOCAL_TOL[1] * prm["supply.pressure"]}
+    e = ca.mtimes(J, ca.mtimes(J, fz)) * (ROS2_C3 * dt ** 3)
+    bad = ca.MX(0) if isinstance(fz, ca.MX) else ca.SX(0)
+    for name, t in tol.items():
+        bad = ca.logic_or(bad, ca.fabs(e[plant.state_index(name)]) > t)
+    return bad
 
 
 def _repeated(one: ca.Function, n: int, nx: int, npar: int) -> ca.Function:
-    """``n`` steps of ``one`` (z, u, p) -> z in a row."""
+    """``n`` steps of ``one`` (z, u, p) -> (z, inexact) in a row (inexact: any of them)."""
     zm, um, pm = ca.MX.sym("z", nx), ca.MX.sym("u"), ca.MX.sym("p", npar)
-    zk = zm
+    zk, flag = zm, ca.MX(0)
     for _ in range(n):
-        zk = one(zk, um, pm)
-    return ca.Function(f"{one.name()}_x{n}", [zm, um, pm], [zk])
+        zk, fk = one(zk, um, pm)
+        flag = ca.logic_or(flag, fk)
+    return ca.Function(f"{one.name()}_x{n}", [zm, um, pm], [zk, flag])
 
 
 def _implausible(plant: Plant, z0, z1) -> ca.MX:
@@ -199,21 +271,36 @@ def _project(plant: Plant, z):
 
 
 def _guarded_step(plant: Plant, h: float, substeps: int) -> ca.Function:
-    """z_{k+1} over one sample: ``substeps`` ROS2 steps; where a step leaves the
-    physically possible states (:func:`_implausible`: at an end stop the chamber
-    shrinks to its dead volume and its pressure time constant to well under a step),
-    that sample is redone with :data:`REFINE` times smaller steps (evaluated only
-    then), and its pressures are kept within their physical bounds."""
+    """(z_{k+1}, inexact) over one sample, given ``refine`` (0 or 1): ``substeps`` ROS2
+    steps, or :data:`REFINE` times as many where ``refine`` is 1 (evaluated only then).
+
+    Where the step leaves the physically possible states (:func:`_implausible`: at an
+    end stop the chamber shrinks to its dead volume and its pressure time constant to
+    well under a step), the sample is redone with the small steps as well, and its
+    pressures are kept within their physical bounds: a last-resort guard for a replay
+    that would otherwise diverge, not an accuracy control.
+
+    ``inexact`` is 1 where the plain step says it cannot be accurate (a friction event
+    inside it, a growing mode too fast for its explicit treatment, a leading local
+    error above :data:`LOCAL_TOL`: :func:`_ros2_step`). It does **not** decide the
+    refinement of this replay: the caller decides ``refine`` for every sample once
+    (:func:`.predict.settle_refinement`), so that within a fit the replay is a smooth
+    function of the parameters (a decision taken sample by sample from the parameters'
+    own replay switches steps between 1 and 8 sub-steps as the parameters move, and the
+    cost jumps: the refits then fitted the static friction 7.7 % low)."""
     nx, npar = len(plant.states), len(plant.p0)
     coarse_one = _ros2_step(plant, h, substeps, "ros2_coarse")
     fine_one = _ros2_step(plant, h, substeps * REFINE, "ros2_fine")
     coarse = coarse_one if substeps == 1 else _repeated(coarse_one, substeps, nx, npar)
     fine = _repeated(fine_one, substeps * REFINE, nx, npar)
     zm, um, pm = ca.MX.sym("z", nx), ca.MX.sym("u"), ca.MX.sym("p", npar)
-    zc = coarse(zm, um, pm)
-    zf = fine(zm, um, pm)
-    zn = ca.if_else(_implausible(plant, zm, zc), _project(plant, zf), zc, True)
-    return ca.Function("ros2", [zm, um, pm], [zn])
+    refine = ca.MX.sym("refine")
+    zc, inexact = coarse(zm, um, pm)
+    zf = fine(zm, um, pm)[0]
+    bad = _implausible(plant, zm, zc)
+    zn = ca.if_else(ca.logic_or(refine, bad), ca.if_else(bad, _project(plant, zf), zf, True),
+                    zc, True)
+    return ca.Function("ros2", [zm, um, pm, refine], [zn, inexact])
 
 
 def _hidden_rest(plant: Plant, z, u_prev, p):
@@ -286,12 +373,13 @@ class Engine:
             uu = ca.if_else(row["closed_loop"], u_held, row["u_rec"])
         else:
             u_held, e_prev, integ, uu = cs[2], c_prev, cs[1], row["u_rec"]
-        zn = step(z_anch, uu, p_k)
+        zn, inexact = step(z_anch, uu, p_k, row["refine"])
         outs = [z_anch[ix], z_anch[ia], z_anch[ib], uu]
         if rates:
             fz = plant.f(z_anch, uu, p_k)
             outs += [fz[iv], fz[ia], fz[ib]]
-        self.rows = OUTPUTS if rates else OUTPUTS[:4]
+        outs.append(inexact)
+        self.rows = (OUTPUTS if rates else OUTPUTS[:4]) + ("inexact",)
         self._sym = (zs, cs, inp, ps, zn, ca.vertcat(e_prev, integ, u_held), ca.vertcat(*outs))
         self._tag = hashlib.sha1(repr((
             plant.state_names, plant.param_names, self.h, substeps, self.chunk, rates,

@@ -12,7 +12,8 @@ from ..params import PlantParams
 from .data import Prepared
 from .engine import INPUT_ROWS
 from .locate import concentration, intervals, regimes, smooth_error
-from .predict import Predictor, horizons, segments
+from . import predict
+from .predict import Predictor, horizons, segments, settle_refinement
 from .refit import CandidateModel
 from .replays import observer_rates
 from .witness import Witness
@@ -63,13 +64,22 @@ def _at_starts(pred: Predictor, prep: Prepared) -> Predictor:
     return pred
 
 
+def _replay(pred: Predictor, base: CandidateModel) -> np.ndarray:
+    """The nominal model's replay of ``pred``; with :data:`.predict.REFINE_STEPS` the
+    engine's refined steps are decided here, once, for every later replay of ``pred``
+    (:func:`.predict.settle_refinement`)."""
+    if predict.REFINE_STEPS:
+        return settle_refinement(pred, lambda pr: base.run(pr, {}))
+    return base.run(pred, {})
+
+
 def nominal(prep: Prepared, params: PlantParams, jit: bool) -> Nominal:
     """Step 2: the nominal model's predictions, witnesses and regimes."""
     shpe, seg = predictors(prep)
     base = CandidateModel(prep, params, None, jit=jit)
-    Y0 = base.run(shpe, {})
+    Y0 = _replay(shpe, base)
     err = shpe.error_by_sample(Y0)
-    seg_cost = seg.cost(base.run(seg, {})) if seg is not None else None
+    seg_cost = seg.cost(_replay(seg, base)) if seg is not None else None
     wit = Witness.build(prep)
     masks = regimes(prep, wit.v_rest)
     witness: dict[str, np.ndarray] = {}

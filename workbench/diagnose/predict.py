@@ -26,7 +26,8 @@ from ..recording import fit
 from .data import Prepared
 from .engine import INPUT_ROWS, EngineInputs
 
-__all__ = ["Predictor", "horizons", "segments", "default_step", "HORIZON", "SEGMENT"]
+__all__ = ["Predictor", "horizons", "segments", "default_step", "HORIZON", "SEGMENT",
+           "friction_events", "settle_refinement", "EVENT_REACH"]
 
 #: s: short-horizon prediction length (about ten time constants of the chambers,
 #: a few of the position loop).
@@ -300,3 +301,82 @@ def segments(prep: Prepared, length: float = SEGMENT, decimate: int = 2,
     d[row["closed_loop"]] = 1.0 if prep.closed else 0.0
     return Predictor("segments", prep, index, EngineInputs(d), pos, prep.signals, _sigma(prep),
                      decimate, step)
+
+
+#: Whether the diagnosis refines the engine's steps (:func:`settle_refinement`) in its
+#: predictors. Off: measured on the single-effect bench case (24 s, concealed dry
+#: friction, loaded 2-core machine, CPU time), the settled refinement took 64 CPU s
+#: against 25 (more refined steps, and 42 candidate models against 27) and named a
+#: spurious valve_offset beside the friction; on the 8 s valve-offset case of
+#: tests/test_diagnose.py it added a negligible leak as a second finding. Both are the
+#: replay's remaining error where it is not refined (the 2 ms step in fast smooth motion:
+#: 67 um rms over 0.2 s windows on a noise-free recording of the exact model, 6 um at
+#: four sub-steps), which the extra effects absorb once the friction events are exact.
+#: The mechanism stays (a decision once per predictor keeps the cost smooth); it is
+#: worth switching on together with a smaller base step.
+REFINE_STEPS = False
+
+#: Engine steps on each side of a friction event of the recording (or of a step the
+#: nominal replay flags) that are refined: the replay of a model that is not yet
+#: fitted meets the event a few ms off the measured instant (2 steps: 4 ms at 1 kHz).
+EVENT_REACH = 2
+
+
+def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:
+    """``mask`` widened by ``reach`` samples on each side."""
+    if reach <= 0 or not mask.any():
+        return mask.copy()
+    return np.convolve(mask.astype(float), np.ones(2 * reach + 1), mode="same") > 0.5
+
+
+def friction_events(prep: Prepared, index: np.ndarray, reach: int = EVENT_REACH
+                    ) -> np.ndarray:
+    """Simulated samples (positions in ``index``) at a friction event of the recording:
+    where the measured (smoothed) velocity reverses, or passes between rest and motion
+    (a stop, a break-away), widened by ``reach`` engine steps on each side.
+
+    These are where a stick-slip replay's one-step method loses its order (the friction
+    law switches inside the step, the Stribeck curve's negative damping right after a
+    break-away). They come from the recording only, never from a model's parameters.
+    Rest: |v| below three times the velocity estimate's noise (at least 1 mm/s, as
+    :class:`.witness.Witness`)."""
+    from scipy.signal import savgol_coeffs
+    sig_v = prep.noise["x"] * float(np.linalg.norm(
+        savgol_coeffs(prep.win_x, 3, deriv=1, delta=prep.dt)))
+    v_rest = max(3.0 * sig_v, 1e-3)
+    v = np.asarray(prep.v, dtype=float)[index]
+    moving = np.abs(v) >= v_rest
+    sign = np.sign(v) * moving
+    ev = np.zeros(len(index), dtype=bool)
+    ev[1:] |= moving[1:] != moving[:-1]                    # stop or break-away
+    # a reversal: the last moving sample's direction differs from this one's
+    last = np.maximum.accumulate(np.where(moving, np.arange(len(v)), -1))
+    prev = np.concatenate(([-1], last[:-1]))
+    flip = moving & (prev >= 0) & (sign != sign[np.maximum(prev, 0)])
+    ev |= flip
+    return _dilate(ev, reach)
+
+
+def settle_refinement(pred: Predictor, run, reach: int = EVENT_REACH) -> np.ndarray:
+    """Decide once which samples of ``pred`` the engine refines, and return the outputs
+    of ``run`` (a replay, ``Y = run(pred)``) with that decision.
+
+    Refined: the recording's friction events (:func:`friction_events`) and the steps
+    that ``run``'s own replay flags as inexact (the engine's ``inexact`` row: a local
+    error estimate above tolerance, e.g. at a valve opening), each widened by ``reach``
+    steps. ``run`` is the nominal model's replay, so the decision does not depend on
+    any candidate's parameters: every candidate is then replayed with the same steps
+    throughout its fit, and the cost is a smooth function of its values (a decision
+    taken per replay makes the cost jump wherever a step switches between one and
+    :data:`.engine.REFINE` sub-steps). At a fitted model, which follows the measurement,
+    the events and valve openings are those of the recording, so they are refined.
+    """
+    ev = friction_events(pred.prep, pred.index, reach)
+    pred.inputs = pred.inputs.with_rows(refine=ev.astype(float))
+    Y = run(pred)
+    flags = np.nan_to_num(np.asarray(Y[-1], dtype=float)) > 0.5
+    mask = ev | _dilate(flags, reach)
+    if np.array_equal(mask, ev):
+        return Y
+    pred.inputs = pred.inputs.with_rows(refine=mask.astype(float))
+    return run(pred)

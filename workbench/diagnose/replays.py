@@ -13,7 +13,8 @@ from ..plant import Plant
 from ..recording import Recording, fit
 from .data import Prepared
 from .engine import Engine
-from .predict import segments
+from . import predict
+from .predict import segments, settle_refinement
 from .refit import CandidateModel, substeps_for
 from .witness import observer_inputs
 
@@ -40,7 +41,8 @@ class EngineOpenLoop:
                  progress=False) -> dict[str, np.ndarray]:
         model = CandidateModel(self.prep, plant.params, None)
         pred = segments(self.prep, self.anchor_every)
-        Y = model.run(pred, {})
+        Y = (settle_refinement(pred, lambda pr: model.run(pr, {})) if predict.REFINE_STEPS
+             else model.run(pred, {}))
         return {k: pred.full(Y, i) for i, k in enumerate(("x", "p_a", "p_b", "u"))}
 
 
