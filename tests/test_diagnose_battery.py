@@ -272,3 +272,33 @@ def test_two_experiments_are_diagnosed_together(rig, tmp_path):
     assert [Path(r["recording"]).name for r in per_run] == ["run7.csv", "run8.csv"]
     for r in per_run:   # the offset explains each run, not only their sum
         assert r["fit_after"]["x"] > r["fit_before"]["x"]
+
+
+def test_dropped_samples_keep_the_logger_period_and_the_closed_loop(rig):
+    """1 % of the samples dropped at random (a USB logger under load): the grid is the
+    logger's 1 ms, not the mean step (1.01 ms, on which the 10 ms controller clock no
+    longer falls), and the closed-loop replay is kept."""
+    from workbench.diagnose.data import logger_period, prepare
+    from workbench.plant import Plant
+    from workbench.recording import Recording
+
+    keep = np.random.default_rng(2).random(len(rig.rec.t)) > 0.01
+    keep[[0, -1]] = True
+    rec = Recording.from_arrays(rig.rec.t[keep], **{c: rig.rec[c][keep] for c in
+                                                    rig.rec.columns if c != "t"})
+    steps = np.diff(rec.t)
+    assert np.mean(steps) > 1.005e-3              # what the mean step would have given
+    assert logger_period(steps) == pytest.approx(1e-3, rel=1e-9)  # rounding of t only
+    prep = prepare(Plant.from_toml(rig.plant), rec)
+    assert prep.dt == pytest.approx(1e-3, rel=1e-9) and prep.closed
+    assert prep.n == len(rig.rec.t)
+
+
+def test_a_gap_in_time_is_refused_with_the_pieces_hint(rig, tmp_path, capsys):
+    head, body = _body(rig)
+    path = _damaged(rig, "gap.csv", head + body[:2000] + body[2050:])
+    out = _out_with_old_file(tmp_path)
+    code = main(["diagnose", str(rig.plant), str(path), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "a gap of 0.051 s" in err and "takes the pieces together" in err, err
+    _nothing_new(out)

@@ -261,8 +261,9 @@ def check_plausible(data: Mapping[str, np.ndarray], metadata: Mapping[str, str],
             f"a gap of {float(steps[i]):.6g} s ({float(steps[i]) / step:.3g} sample steps "
             f"of {step:.6g} s) between t = {float(t[i])!r} s and t = {float(t[i + 1])!r} s; "
             f"steps up to {GAP_FACTOR:g} times the median (jitter, dropped samples) are "
-            "accepted, a longer gap means the file is not one continuous run: split it, or "
-            "load a time window on one side of the gap", source=source,
+            "accepted, a longer gap means the file is not one continuous run: split it at "
+            "the gap (workbench diagnose takes the pieces together, as several recordings "
+            "of one rig), or load a time window on one side of the gap", source=source,
             location=where.cell("t", i + 1))
     if "sample_time" in metadata:
         declared = float(metadata["sample_time"])

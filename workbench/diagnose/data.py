@@ -25,7 +25,8 @@ from ..replay import controller_agreement as _controller_agreement
 from ..replay import controller_phase as _controller_phase
 from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
 
-__all__ = ["Prepared", "prepare", "prepare_many", "other_side", "uniform", "recorded_supply", "MIN_DURATION",
+__all__ = ["Prepared", "prepare", "prepare_many", "other_side", "uniform", "logger_period",
+           "recorded_supply", "MIN_DURATION",
            "SHORT_DURATION", "savgol"]
 
 #: s: shorter recordings are refused (a few closed-loop time constants at least).
@@ -266,6 +267,22 @@ def command_switches(t: np.ndarray, u: np.ndarray, period: float
     return np.where(ok[k], inst[k], hi), j
 
 
+def logger_period(steps: np.ndarray) -> float:
+    """The logger's nominal sample period (s) from its time steps (s): the duration over
+    the number of periods it spans, each step counted as the whole number of median
+    steps nearest to it. With jitter alone that is the mean step (jitter averages out);
+    a dropped sample is a step of two periods, counted as two (the mean step would be
+    too long by the share of samples dropped, and the controller's clock would no
+    longer fit the grid).
+
+    >>> round(logger_period(np.array([1e-3, 1e-3, 2e-3, 1e-3])) * 1e3, 9)
+    1.0
+    """
+    med = float(np.median(steps))
+    periods = np.maximum(np.rint(steps / med), 1.0)
+    return float(np.sum(steps) / np.sum(periods))
+
+
 def uniform(rec: Recording, dt: float, period: float | None = None) -> Recording:
     """``rec`` on a uniform grid of period ``dt`` (s) from its first sample: measured
     columns interpolated linearly, :data:`HELD` columns held from the last sample at or
@@ -396,8 +413,8 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto",
         raise InputError("the time column t must increase strictly from sample to sample",
                          source=src, location="column 't'")
     if np.max(np.abs(steps - dt)) > 0.05 * dt:
-        dt = float((t[-1] - t[0]) / (n - 1))     # the mean step: jitter averages out
-        notes.append(f"the sample time varies (mean {dt * 1e3:.3g} ms, range "
+        dt = logger_period(steps)
+        notes.append(f"the sample time varies (period {dt * 1e3:.3g} ms, range "
                      f"{steps.min() * 1e3:.3g}..{steps.max() * 1e3:.3g} ms): the recording is "
                      f"resampled on a uniform {dt * 1e3:.3g} ms grid (measurements linearly "
                      "interpolated, the command and reference held as a logger's outputs are; the "
