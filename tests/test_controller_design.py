@@ -377,3 +377,23 @@ def test_fl_breaks_away_on_a_rig_with_more_friction_than_its_plant_file():
                                "load.mass": 1.32})
     ev = evaluate_design(plant, "fl", reference=ref, jit=False, rig=rig)
     assert ev.validation.metrics.sine_error_max < 5e-3
+
+
+def test_report_table_has_one_number_format_per_unit():
+    # the precision report's validation table printed 23.1500 s, 0.9202 s and 2.358 %
+    # (5 significant digits); now mm, s and bar with 3 decimals, % with 2
+    from types import SimpleNamespace
+    from workbench.controllers.evaluation import _check_rows
+    from workbench.validate import Check
+    checks = [Check("simulation", 23.15, 23.15, "s", True, bound="min"),
+              Check("settling time", 0.92022, 1.5, "s", True),
+              Check("overshoot", 2.35806, 2.0, "%", False),
+              Check("steady-state error", 3.2353e-4, 1.220703125e-4, "m", False),
+              Check("min chamber pressure", 311920.0, 81325.0, "Pa", True, bound="min"),
+              Check("settling time", math.inf, 1.5, "s", False)]
+    rows = _check_rows(SimpleNamespace(checks=checks))
+    assert [r[1] for r in rows] == [">= 23.150", "<= 1.500", "<= 2.00", "<= 0.122", ">= 0.813",
+                                    "<= 1.500"]
+    assert [r[3] for r in rows] == ["23.150", "0.920", "2.36", "0.324", "3.119", "inf"]
+    assert [r[2] for r in rows] == ["s", "s", "%", "mm", "bar abs", "s"]
+    assert [r[4] for r in rows] == [True, True, False, False, True, False]
