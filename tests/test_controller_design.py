@@ -217,7 +217,10 @@ def test_fl_friction_feedforward_reduces_the_sine_error_on_the_precision_rig(mon
     # Measured worst error with / without (seed 0 unless said): this sine alone
     # 10.2 / 13.3 mm; test profile of test_precision_positioning 11.3 / 13.7 (seed 1:
     # 9.9 / 13.8); precision profile 9.1 / 13.3 (seed 1: 13.4 / 13.2, no gain). So
-    # not a cure: required here a gain beyond 15 % on this case, not a fixed figure
+    # not a cure: required here a gain beyond 15 % on this case, not a fixed figure.
+    # With the break-away (feedback_linearizing.breakaway, branch h14h): this sine
+    # 3.3 / 13.3 mm, the precision profile's 3.8-4.0 mm (seeds 0-1); required now at
+    # most half (the margin for other seeds)
     from workbench import references
     from workbench.controllers import compensation
     from workbench.controllers.evaluation import evaluate_design
@@ -230,7 +233,7 @@ def test_fl_friction_feedforward_reduces_the_sine_error_on_the_precision_rig(mon
     fed = evaluate_design(plant, "fl", reference=ref, jit=False).validation.metrics.sine_error_max
     monkeypatch.setattr(compensation.FrictionModel, "from_plant", classmethod(lambda cls, pl: None))
     bare = evaluate_design(plant, "fl", reference=ref, jit=False).validation.metrics.sine_error_max
-    assert fed < 0.85 * bare, (fed, bare)
+    assert fed < 0.5 * bare, (fed, bare)
 
 
 def test_report_says_how_each_law_uses_the_friction_model():
@@ -330,3 +333,67 @@ def test_breakaway_state_enters_stuck_and_leaves_on_a_measured_move():
     assert breakaway(brk, -0.1, 0.0, 0.2 + 1.2e-4, vs) == brk     # moved the wrong way
     assert breakaway(brk, -0.1, 0.0, 0.2 - 1.2e-4, vs) is None    # broke away
     assert breakaway(brk, 0.1, 0.0, 0.2, vs) is None              # direction changed
+
+
+def test_pid_break_away_and_friction_rate_cut_the_sine_error_on_the_precision_rig(monkeypatch):
+    # the precision rig's 60 mm 0.5 Hz sine (12-bit x, noisy p, no v): without the
+    # friction terms the PID's piston sticks at the start and each reversal while its
+    # proportional term builds the force at 4 mV per mm (9.8 mm worst on the
+    # precision profile, seed 0). Measured on this sine, seed 0: with / without
+    # 3.2 / 10.6 mm; required: at most half (a margin for other seeds: the
+    # precision profile's seeds 0-4 gave 3.3-3.4 mm with them)
+    from workbench import references
+    from workbench.controllers import compensation
+    from workbench.controllers.evaluation import evaluate_design
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    c = 0.25
+    pts = [(0.0, c - 0.06), (0.3, c - 0.06)] + references.sine_points(0.3, c, 0.06, 0.5, 1)[1:]
+    pts += [(2.8, c - 0.06)]
+    p = references.profile(pts)
+    ref = references.Reference(p.times, p.values, sections=(("sine", 0.3, 2.3),))
+    fed = evaluate_design(plant, "pid", reference=ref, jit=False).validation.metrics.sine_error_max
+    monkeypatch.setattr(compensation.FrictionModel, "from_plant", classmethod(lambda cls, pl: None))
+    bare = evaluate_design(plant, "pid", reference=ref, jit=False).validation.metrics.sine_error_max
+    assert fed < 0.5 * bare, (fed, bare)
+
+
+def test_fl_breaks_away_on_a_rig_with_more_friction_than_its_plant_file():
+    # designed from the precision rig's file (static friction 25 N), run on a rig with
+    # 1.5 x the friction (37.5 / 22.5 N) and 10 % more mass. Stuck at the sine's start
+    # and reversals, a break-away that drove the force to the file's F_s stopped
+    # there: precision profile --quick, seed 0, sine worst 16.7 mm, ramp 19.5 mm; with
+    # the force taken beyond F_s until the piston moves 3.5 / 7.1 mm. Measured on this
+    # sine: 3.2 / 3.3 mm (seeds 0 / 1); the limit 5 mm pins that class (the nominal
+    # rig's own error on it is 3.3 mm), far below the 15-17 mm without
+    from workbench import references
+    from workbench.controllers.evaluation import evaluate_design
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    c = 0.25
+    pts = [(0.0, c - 0.06), (0.3, c - 0.06)] + references.sine_points(0.3, c, 0.06, 0.5, 1)[1:]
+    pts += [(2.8, c - 0.06)]
+    p = references.profile(pts)
+    ref = references.Reference(p.times, p.values, sections=(("sine", 0.3, 2.3),))
+    rig = plant.with_params(**{"friction.coulomb": 22.5, "friction.static": 37.5,
+                               "load.mass": 1.32})
+    ev = evaluate_design(plant, "fl", reference=ref, jit=False, rig=rig)
+    assert ev.validation.metrics.sine_error_max < 5e-3
+
+
+def test_report_table_has_one_number_format_per_unit():
+    # the precision report's validation table printed 23.1500 s, 0.9202 s and 2.358 %
+    # (5 significant digits); now mm, s and bar with 3 decimals, % with 2
+    from types import SimpleNamespace
+    from workbench.controllers.evaluation import _check_rows
+    from workbench.validate import Check
+    checks = [Check("simulation", 23.15, 23.15, "s", True, bound="min"),
+              Check("settling time", 0.92022, 1.5, "s", True),
+              Check("overshoot", 2.35806, 2.0, "%", False),
+              Check("steady-state error", 3.2353e-4, 1.220703125e-4, "m", False),
+              Check("min chamber pressure", 311920.0, 81325.0, "Pa", True, bound="min"),
+              Check("settling time", math.inf, 1.5, "s", False)]
+    rows = _check_rows(SimpleNamespace(checks=checks))
+    assert [r[1] for r in rows] == [">= 23.150", "<= 1.500", "<= 2.00", "<= 0.122", ">= 0.813",
+                                    "<= 1.500"]
+    assert [r[3] for r in rows] == ["23.150", "0.920", "2.36", "0.324", "3.119", "inf"]
+    assert [r[2] for r in rows] == ["s", "s", "%", "mm", "bar abs", "s"]
+    assert [r[4] for r in rows] == [True, True, False, False, True, False]

@@ -170,7 +170,7 @@ class DesignEvaluation:
                           f"{self.pressure_noise:g} Pa (std), no velocity"),
               ("per-sample computation", f"median {self.median_update_ms:.3f} ms, 99 % "
                                          f"{np.percentile(self.update_times, 99) * 1e3:.3f} ms")]
-        rows = [[r[0], r[2], r[3], r[1], r[4] == "pass"] for r in v.table()]
+        rows = _check_rows(v)
         hold_rows = [[h["segment"], f"{h['steady_state_error'] * 1e3:.3f}",
                       f"{h['peak_to_peak'] * 1e3:.3f}", h["command_changes"]]
                      for h in self.holds]
@@ -193,6 +193,30 @@ class DesignEvaluation:
                           "Reference and position, command, chamber pressures", width=0.9),
             ]),
         ]
+
+
+#: Decimals of a check's value and limit in the report, by display unit: one format
+#: per unit (the validation's own table gives 5 significant digits: 23.1500 s,
+#: 0.9202 s and 2.358 % in one column).
+_DECIMALS = {"mm": 3, "%": 2, "s": 3, "bar abs": 3}
+
+
+def _check_rows(validation) -> list:
+    """Rows (check, limit, unit, value, passed) of the validation table for the
+    report, value and limit with a fixed number of decimals per unit."""
+    from ..validate import _DISPLAY
+    rows = []
+    for c in validation.checks:
+        k, unit = _DISPLAY.get(c.unit, (1.0, c.unit))
+        n = _DECIMALS.get(unit, 3)
+
+        def cell(x: float) -> str:
+            x = float(x) * k
+            return (f"{x:.{n}f}" if math.isfinite(x) else
+                    "n/a" if math.isnan(x) else ("inf" if x > 0 else "-inf"))
+        op = "<=" if c.bound == "max" else ">="
+        rows.append([c.name, f"{op} {cell(c.limit)}", unit, cell(c.value), c.passed])
+    return rows
 
 
 def _hold_text(comp) -> str:

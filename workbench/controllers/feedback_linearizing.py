@@ -369,7 +369,9 @@ def breakaway(brk, want: float, v: float, x_m: float, stribeck_velocity: float):
     bandwidth (FL: lambda^3 e of jerk; 190 ms stuck at each reversal of the
     precision rig's sine, 10.6 mm behind, and a 10 mm step stalled half-way for
     170 ms, then broke away 1.8 mm past its target). The laws use the static
-    friction in the wanted direction instead while this state is set.
+    friction in the wanted direction instead while this state is set (FL: or the
+    force that has not moved the piston plus the Stribeck excess F_s - F_c, so a rig
+    with more friction than its file is still broken away).
     """
     vs = float(stribeck_velocity)
     s = math.copysign(1.0, want) if abs(want) >= vs else 0.0
@@ -565,8 +567,15 @@ class FeedbackLinearizing:
                             float(y.get("x_measured", x)), vs)
             if brk is not None:
                 # stuck, the reference moving on: the force to beat is the static
-                # friction in that direction, not the holding force the estimate has
-                d, f_lag = brk[0] * float(self.friction.static), f_fed
+                # friction in that direction, not the holding force the estimate has;
+                # a force beyond the model's F_s that has not moved the piston says the
+                # rig's is larger: it is then taken as that force plus the Stribeck
+                # excess F_s - F_c, so the law keeps raising the force at k2 (F_s -
+                # F_c) / m of jerk until the piston moves (on a rig with 1.5 x the
+                # friction the force approached the model's F_s and stopped there)
+                fs, fc = float(self.friction.static), float(self.friction.coulomb)
+                d = brk[0] * max(fs, brk[0] * (F - m.external_force) + (fs - fc))
+                f_lag = f_fed
             elif was is not None:
                 # broke away: the friction drops to its sliding level now, the
                 # estimate (the holding force) learns it only in friction_lag;
