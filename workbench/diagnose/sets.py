@@ -60,10 +60,11 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from .candidates import Candidate
+from .combined import Combined, combine
 from .explain import DBIC_MIN, GAIN_MIN, SCREEN_NFEV, SEG_WORSE, Chosen, Ranked, Refits
-from .locate import EXPECTED
 from .leakfloor import LeakFloor
 from .refit import FitResult
+from .tradeoffs import TRADE_OFF, by_member, tells_apart, trade_offs
 
 __all__ = ["Combined", "combine", "SetScore", "search", "by_member", "trade_offs", "tells_apart",
            "suggested", "LeakFloor",
@@ -76,8 +77,6 @@ FULL_SETS = 2
 #: Smallest short-horizon cost a member must remove, in noise units: one signal's noise
 #: variance (the cost is the mean squared residual over the noise, summed over signals).
 MIN_REMOVED = 1.0
-#: |correlation| of two members' fitted values above which they are reported as trading off.
-TRADE_OFF = 0.8
 #: Smallest relative change of a nominal value that is a correction (``parameter_error``).
 #: The fit's own model (ROS2 steps of 2 ms, not CVODES) shifts fitted values: on a
 #: recording of the workbench's simulator with every nominal value right and a valve
@@ -91,85 +90,6 @@ MIN_CORRECTION = 0.03
 #: scale with the rig (force capacity, valve conductance, command span), so this does;
 #: 5 % is a factor 1.4 on a Coulomb range of 0.1-60 % of the force capacity.
 NEUTRAL_BAND = 0.05
-
-
-@dataclass(frozen=True)
-class Combined(Candidate):
-    """Several candidates fitted together (their values all free at once)."""
-
-    members: tuple[Candidate, ...] = ()
-    nominal_point: Mapping[str, float] = field(default_factory=dict)
-    subset_points: tuple[Mapping[str, float], ...] = ()
-    scan_points: tuple[Mapping[str, float], ...] = ()
-
-    def split(self, values: Mapping[str, float]) -> list[dict[str, float]]:
-        """The fitted values of each member (candidate keys)."""
-        return [{f.key: values[f.key] for f in m.free if f.key in values} for m in self.members]
-
-    def grid_points(self) -> list[dict[str, float]]:
-        """Every member at its start value; the corrected nominal values back at the
-        plant file's (:func:`combine`); each subset's fit with the left-out member at
-        its neutral values (:func:`combine`); then the scanned members' grids, one
-        member at a time."""
-        return [{}] + ([dict(self.nominal_point)] if self.nominal_point else []) \
-            + [dict(p) for p in self.subset_points] + [dict(p) for p in self.scan_points] \
-            + (super().grid_points() if self.grid else [])
-
-    def plant_values(self, values: Mapping[str, float]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for m, v in zip(self.members, self.split(values)):
-            out.update(m.plant_values(v))
-        return out
-
-
-def combine(members: Sequence[Candidate], starts: Mapping[str, float] | None = None,
-            scan: Candidate | Sequence[Candidate] | None = None,
-            subsets: Sequence[Mapping[str, float]] = ()) -> Combined | None:
-    """The joint candidate of ``members`` (None when two of them set the same plant key
-    or are the same effect).
-
-    ``starts`` (candidate keys -> values, e.g. the single fits) become the start values;
-    the joint signature scan is ``scan``'s grid (each of several in turn) with the
-    others at their start values (one member is scanned while the others keep what
-    they explained alone), plus the
-    point where every member is at its start value, plus ``subsets``: the fitted values
-    of the sets with one member left out, that member at its neutral values
-    (:meth:`Candidate.neutral_values`). A set contains each of its subsets as that
-    special case, so its fit starting from the best of them is never worse than the
-    subset's (measured without these points: valve_deadband + valve_offset refitted
-    from the singles' values cost 5849 noise units where the deadband alone, fitted
-    37 % too wide to mimic the offset, cost 4955; the offset's own share came out
-    negative and the offset was not named)."""
-    keys: set[str] = set()
-    effects: set[str] = set()
-    for m in members:
-        mk = {f.key for f in m.free} | set(m.fixed)
-        if mk & keys or (m.effect != "parameter_error" and m.effect in effects):
-            return None
-        keys |= mk
-        effects.add(m.effect)
-    fixed: dict[str, Any] = {}
-    for m in members:
-        fixed.update(m.fixed)
-    starts = starts or {}
-    # a nominal value refitted alone may have drifted far to mimic another member's
-    # effect (measured: with a deadband, mass x3.6 and supply -40 %); the scan also
-    # tries the plant file's values, from which the joint refit reaches the small
-    # errors a plant file has
-    nominal_point = {f.key: f.start for m in members if m.effect == "parameter_error"
-                     for f in m.free if f.key in starts and len(members) > 1}
-    free = tuple(replace(f, start=min(max(float(starts[f.key]), f.low), f.high))
-                 if f.key in starts else f for m in members for f in m.free)
-    scans = [] if scan is None else [scan] if isinstance(scan, Candidate) else list(scan)
-    points = tuple(p for c in scans for p in c.grid_points())
-    return Combined(name="+".join(m.name for m in members),
-                    effect="+".join(m.effect for m in members), free=free, fixed=fixed,
-                    scan_points=points,
-                    needs_pressures=any(m.needs_pressures for m in members),
-                    describe=" and ".join(m.name for m in members), members=tuple(members),
-                    nominal_point=nominal_point,
-                    neutral={k: v for m in members for k, v in m.neutral_values().items()},
-                    subset_points=tuple(dict(p) for p in subsets))
 
 
 @dataclass
@@ -609,53 +529,3 @@ def _as_chosen(best: SetScore, scores: Mapping[tuple[str, ...], SetScore],
                           f"nominal mismatch in the set {' + '.join(best.names)}")
         chosen.add(r)
     return chosen
-
-
-def by_member(joint: FitResult, members: Sequence[Candidate]) -> dict[str, dict[str, float]]:
-    """The joint fit's values split by member name."""
-    return {m.name: {f.key: joint.values[f.key] for f in m.free} for m in members}
-
-
-def _shows(name: str, by: Mapping[str, Candidate], masks: Mapping[str, np.ndarray]) -> str:
-    """Where candidate ``name``'s signature shows (:data:`.locate.EXPECTED`) and the
-    share of this recording's time spent there."""
-    regimes = EXPECTED.get(name, EXPECTED.get(by[name].effect, ())) if name in by else ()
-    if not regimes:
-        return "throughout"
-    union = None
-    for r in regimes:
-        m = masks.get(r)
-        if m is not None:
-            union = m.copy() if union is None else union | m
-    share = f" ({100 * float(np.mean(union)):.0f} % of this recording)" \
-        if union is not None and union.size else ""
-    return " / ".join(regimes) + share
-
-
-def tells_apart(a: Sequence[str], b: Sequence[str], by: Mapping[str, Candidate],
-                masks: Mapping[str, np.ndarray]) -> str:
-    """What data would separate explanation ``a`` from ``b`` (member names): the
-    operating regimes where the members that only one of them has show, with the share
-    of this recording spent in each (little time there: record more of it)."""
-    only_a = [m for m in a if m not in b] or list(a)
-    only_b = [m for m in b if m not in a] or list(b)
-    side = [" and ".join(f"{m} shows {_shows(m, by, masks)}" for m in ms)
-            for ms in (only_a, only_b)]
-    return f"{side[0]}; {side[1]}: a recording with more of those regimes separates them"
-
-
-def trade_offs(best: SetScore, by: Mapping[str, Candidate],
-               masks: Mapping[str, np.ndarray] | None = None) -> list[dict[str, Any]]:
-    """Pairs of values of different members whose joint-fit correlation exceeds
-    :data:`TRADE_OFF`, with the regimes where each member's signature shows and the
-    share of the recording spent there (data rich in those regimes tells them apart)."""
-    corr = best.result.corr if best.result is not None else {}
-    owner = {f.key: m for m in best.names for f in by[m].free}
-    out = []
-    for (a, b), c in corr.items():
-        if owner.get(a) == owner.get(b) or abs(c) < TRADE_OFF:
-            continue
-        out.append({"values": [a, b], "members": [owner[a], owner[b]],
-                    "correlation": round(float(c), 2),
-                    "tells_apart": tells_apart([owner[a]], [owner[b]], by, masks or {})})
-    return out
