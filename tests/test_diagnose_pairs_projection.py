@@ -253,7 +253,7 @@ def test_a_member_that_makes_a_pressure_worse_to_fit_the_position_is_not_named()
     the sum) but p_a to 2.46 and p_b to 1.31 -- significantly worse over p_a's 357
     observations (dBIC +125). It absorbs the position mismatch: not named; the pair is.
     Before: offset + lines + valve_dynamics."""
-    from workbench.diagnose.sets import SetScore, _earns
+    from workbench.diagnose.sets import SetScore, _earns, _worse_signals
     from workbench.diagnose.refit import FitResult
 
     def score(names, signals, k):
@@ -271,6 +271,8 @@ def test_a_member_that_makes_a_pressure_worse_to_fit_the_position_is_not_named()
                if c.name == "valve_dynamics")
     assert _earns(pair, triple)                   # by the summed cost alone it earns
     assert not _earns(pair, triple, 1071.0, lag)  # p_a significantly worse: it does not
+    # p_a +125, p_b +14.8 over 357 observations each (both beyond DBIC_MIN = 10)
+    assert _worse_signals(pair, triple, 1071.0) == ["p_a", "p_b"]
     # the same gain in x without the pressures getting worse earns
     fair = score(triple.names, {"x": 21.250, "p_a": 1.730, "p_b": 1.252}, 5)
     assert _earns(pair, fair, 1071.0, lag)

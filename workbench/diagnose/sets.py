@@ -215,15 +215,17 @@ def suggested(best: SetScore, scores: Mapping[tuple[str, ...], SetScore],
                 or _negligible(by.get(m), s.result, floor) or not others_earn:
             continue
         share = removed / best.cost
+        worse = _worse_signals(best, s, n) if n is not None else []
+        why = (f"but makes {' and '.join(worse)} significantly worse: it trades signals, "
+               "likely absorbing what the others' model form leaves") if worse else \
+            (f"less than the {100 * GAIN_MIN:.0f} % a finding needs: possibly a real effect "
+             "hidden by what the others' model form leaves, possibly that residue absorbed")
         out.append({"member": m, "share_of_rest": share, "dbic": dbic,
-                    "removed_noise_units": removed,
+                    "removed_noise_units": removed, "worse_signals": worse,
                     "values": {f.key: s.result.values[f.key] for f in by[m].free
                                if f.key in s.result.values} if m in by else {},
                     "text": f"{m} would remove a further {100 * share:.0f} % of what "
-                            f"{' + '.join(best.names)} leaves (dBIC {dbic:.0f}), less than "
-                            f"the {100 * GAIN_MIN:.0f} % a finding needs: possibly a real "
-                            "effect hidden by what the others' model form leaves, possibly "
-                            "that residue absorbed"})
+                            f"{' + '.join(best.names)} leaves (dBIC {dbic:.0f}), {why}"})
     return out
 
 
@@ -362,9 +364,14 @@ def _worsens(without: SetScore, with_: SetScore, n: float) -> bool:
     the position from 45.4 to 21.3 noise units -- below the concealed pair's own 37.9,
     the line replay's mismatch -- while p_a rose from 1.73 to 2.46 (dBIC +125 over
     p_a's 357 observations); it was named."""
+    return bool(_worse_signals(without, with_, n))
+
+
+def _worse_signals(without: SetScore, with_: SetScore, n: float) -> list[str]:
+    """The signals :func:`_worsens` finds significantly worse."""
     a, b = _signal_costs(without, with_)
     n_s = n / max(len(a), 1)
-    return any(a[s] > 0 and b[s] > 0 and n_s * math.log(b[s] / a[s]) >= DBIC_MIN for s in a)
+    return [s for s in a if a[s] > 0 and b[s] > 0 and n_s * math.log(b[s] / a[s]) >= DBIC_MIN]
 
 
 def _in_a_signal(without: SetScore, with_: SetScore, n: float) -> bool:
