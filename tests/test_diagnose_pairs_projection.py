@@ -244,3 +244,35 @@ def test_an_effect_that_helps_only_the_signal_others_cannot_reach_is_only_said()
     chosen, info = _search_signals(costs, signals, 12223.2)
     assert info["chosen"] == ["line_dynamics"]
     assert "supply_droop" in [s["member"] for s in info["suggested"]]
+
+
+def test_a_member_that_makes_a_pressure_worse_to_fit_the_position_is_not_named():
+    """Case 14 (valve offset and 3.6 m lines; signal costs measured on this branch):
+    the pair leaves x 45.4, p_a 1.73, p_b 1.25 noise units (the concealed pair itself
+    37.9 in x: the line replay); a spool lag on top takes x to 21.3 (removing 48 % of
+    the sum) but p_a to 2.46 and p_b to 1.31 -- significantly worse over p_a's 357
+    observations (dBIC +125). It absorbs the position mismatch: not named; the pair is.
+    Before: offset + lines + valve_dynamics."""
+    from workbench.diagnose.sets import SetScore, _earns, _worse_signals
+    from workbench.diagnose.refit import FitResult
+
+    def score(names, signals, k):
+        cost = sum(signals.values())
+        res = FitResult(name="+".join(names), effect="", k=k, values={}, std={}, ci95={},
+                        cost=cost, signal_costs=dict(signals), seg_cost=None, grid=[],
+                        fits={}, plant_values={})
+        return SetScore(names, res, cost, k, 1071.0 * math.log(cost) + k * math.log(1071.0))
+
+    pair = score(("line_dynamics", "valve_offset"), {"x": 45.396, "p_a": 1.730, "p_b": 1.252}, 3)
+    triple = score(("line_dynamics", "valve_dynamics", "valve_offset"),
+                   {"x": 21.250, "p_a": 2.457, "p_b": 1.305}, 5)
+    from workbench.diagnose.candidates import candidates
+    lag = next(c for c in candidates(synth.concealed_case("none", seed=0).nominal)
+               if c.name == "valve_dynamics")
+    assert _earns(pair, triple)                   # by the summed cost alone it earns
+    assert not _earns(pair, triple, 1071.0, lag)  # p_a significantly worse: it does not
+    # p_a +125, p_b +14.8 over 357 observations each (both beyond DBIC_MIN = 10)
+    assert _worse_signals(pair, triple, 1071.0) == ["p_a", "p_b"]
+    # the same gain in x without the pressures getting worse earns
+    fair = score(triple.names, {"x": 21.250, "p_a": 1.730, "p_b": 1.252}, 5)
+    assert _earns(pair, fair, 1071.0, lag)

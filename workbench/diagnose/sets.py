@@ -29,7 +29,8 @@ for new physics, fails this). Earning also needs a share: the member removes
 :data:`~.explain.GAIN_MIN` of what the others leave -- or, for an effect, of what they
 leave *above the noise floor* in one signal, significantly over that signal's
 observations (:func:`_in_a_signal`: a signal the others' model form cannot reach, e.g.
-the position beside lumped lines, otherwise dilutes a real effect's share). A member
+the position beside lumped lines, otherwise dilutes a real effect's share); and no
+signal may get significantly worse with it (:func:`_worsens`). A member
 must not earn by making up for its partner's fit stuck short of its optimum: the sets
 inside the best pair and the best triple are refitted again from that set's values
 with the member left out at its neutral values (:func:`_project_pairs`,
@@ -60,10 +61,11 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from .candidates import Candidate
+from .combined import Combined, combine
 from .explain import DBIC_MIN, GAIN_MIN, SCREEN_NFEV, SEG_WORSE, Chosen, Ranked, Refits
-from .locate import EXPECTED
 from .leakfloor import LeakFloor
 from .refit import FitResult
+from .tradeoffs import TRADE_OFF, by_member, tells_apart, trade_offs
 
 __all__ = ["Combined", "combine", "SetScore", "search", "by_member", "trade_offs", "tells_apart",
            "suggested", "LeakFloor",
@@ -76,8 +78,6 @@ FULL_SETS = 2
 #: Smallest short-horizon cost a member must remove, in noise units: one signal's noise
 #: variance (the cost is the mean squared residual over the noise, summed over signals).
 MIN_REMOVED = 1.0
-#: |correlation| of two members' fitted values above which they are reported as trading off.
-TRADE_OFF = 0.8
 #: Smallest relative change of a nominal value that is a correction (``parameter_error``).
 #: The fit's own model (ROS2 steps of 2 ms, not CVODES) shifts fitted values: on a
 #: recording of the workbench's simulator with every nominal value right and a valve
@@ -91,85 +91,6 @@ MIN_CORRECTION = 0.03
 #: scale with the rig (force capacity, valve conductance, command span), so this does;
 #: 5 % is a factor 1.4 on a Coulomb range of 0.1-60 % of the force capacity.
 NEUTRAL_BAND = 0.05
-
-
-@dataclass(frozen=True)
-class Combined(Candidate):
-    """Several candidates fitted together (their values all free at once)."""
-
-    members: tuple[Candidate, ...] = ()
-    nominal_point: Mapping[str, float] = field(default_factory=dict)
-    subset_points: tuple[Mapping[str, float], ...] = ()
-    scan_points: tuple[Mapping[str, float], ...] = ()
-
-    def split(self, values: Mapping[str, float]) -> list[dict[str, float]]:
-        """The fitted values of each member (candidate keys)."""
-        return [{f.key: values[f.key] for f in m.free if f.key in values} for m in self.members]
-
-    def grid_points(self) -> list[dict[str, float]]:
-        """Every member at its start value; the corrected nominal values back at the
-        plant file's (:func:`combine`); each subset's fit with the left-out member at
-        its neutral values (:func:`combine`); then the scanned members' grids, one
-        member at a time."""
-        return [{}] + ([dict(self.nominal_point)] if self.nominal_point else []) \
-            + [dict(p) for p in self.subset_points] + [dict(p) for p in self.scan_points] \
-            + (super().grid_points() if self.grid else [])
-
-    def plant_values(self, values: Mapping[str, float]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for m, v in zip(self.members, self.split(values)):
-            out.update(m.plant_values(v))
-        return out
-
-
-def combine(members: Sequence[Candidate], starts: Mapping[str, float] | None = None,
-            scan: Candidate | Sequence[Candidate] | None = None,
-            subsets: Sequence[Mapping[str, float]] = ()) -> Combined | None:
-    """The joint candidate of ``members`` (None when two of them set the same plant key
-    or are the same effect).
-
-    ``starts`` (candidate keys -> values, e.g. the single fits) become the start values;
-    the joint signature scan is ``scan``'s grid (each of several in turn) with the
-    others at their start values (one member is scanned while the others keep what
-    they explained alone), plus the
-    point where every member is at its start value, plus ``subsets``: the fitted values
-    of the sets with one member left out, that member at its neutral values
-    (:meth:`Candidate.neutral_values`). A set contains each of its subsets as that
-    special case, so its fit starting from the best of them is never worse than the
-    subset's (measured without these points: valve_deadband + valve_offset refitted
-    from the singles' values cost 5849 noise units where the deadband alone, fitted
-    37 % too wide to mimic the offset, cost 4955; the offset's own share came out
-    negative and the offset was not named)."""
-    keys: set[str] = set()
-    effects: set[str] = set()
-    for m in members:
-        mk = {f.key for f in m.free} | set(m.fixed)
-        if mk & keys or (m.effect != "parameter_error" and m.effect in effects):
-            return None
-        keys |= mk
-        effects.add(m.effect)
-    fixed: dict[str, Any] = {}
-    for m in members:
-        fixed.update(m.fixed)
-    starts = starts or {}
-    # a nominal value refitted alone may have drifted far to mimic another member's
-    # effect (measured: with a deadband, mass x3.6 and supply -40 %); the scan also
-    # tries the plant file's values, from which the joint refit reaches the small
-    # errors a plant file has
-    nominal_point = {f.key: f.start for m in members if m.effect == "parameter_error"
-                     for f in m.free if f.key in starts and len(members) > 1}
-    free = tuple(replace(f, start=min(max(float(starts[f.key]), f.low), f.high))
-                 if f.key in starts else f for m in members for f in m.free)
-    scans = [] if scan is None else [scan] if isinstance(scan, Candidate) else list(scan)
-    points = tuple(p for c in scans for p in c.grid_points())
-    return Combined(name="+".join(m.name for m in members),
-                    effect="+".join(m.effect for m in members), free=free, fixed=fixed,
-                    scan_points=points,
-                    needs_pressures=any(m.needs_pressures for m in members),
-                    describe=" and ".join(m.name for m in members), members=tuple(members),
-                    nominal_point=nominal_point,
-                    neutral={k: v for m in members for k, v in m.neutral_values().items()},
-                    subset_points=tuple(dict(p) for p in subsets))
 
 
 @dataclass
@@ -294,15 +215,17 @@ def suggested(best: SetScore, scores: Mapping[tuple[str, ...], SetScore],
                 or _negligible(by.get(m), s.result, floor) or not others_earn:
             continue
         share = removed / best.cost
+        worse = _worse_signals(best, s, n) if n is not None else []
+        why = (f"but makes {' and '.join(worse)} significantly worse: it trades signals, "
+               "likely absorbing what the others' model form leaves") if worse else \
+            (f"less than the {100 * GAIN_MIN:.0f} % a finding needs: possibly a real effect "
+             "hidden by what the others' model form leaves, possibly that residue absorbed")
         out.append({"member": m, "share_of_rest": share, "dbic": dbic,
-                    "removed_noise_units": removed,
+                    "removed_noise_units": removed, "worse_signals": worse,
                     "values": {f.key: s.result.values[f.key] for f in by[m].free
                                if f.key in s.result.values} if m in by else {},
                     "text": f"{m} would remove a further {100 * share:.0f} % of what "
-                            f"{' + '.join(best.names)} leaves (dBIC {dbic:.0f}), less than "
-                            f"the {100 * GAIN_MIN:.0f} % a finding needs: possibly a real "
-                            "effect hidden by what the others' model form leaves, possibly "
-                            "that residue absorbed"})
+                            f"{' + '.join(best.names)} leaves (dBIC {dbic:.0f}), {why}"})
     return out
 
 
@@ -411,15 +334,44 @@ def _earns(without: SetScore, with_: SetScore, n: float | None = None,
            member: Candidate | None = None) -> bool:
     """Whether a member earns its place: with it the BIC falls by :data:`DBIC_MIN` and
     it removes at least :data:`MIN_REMOVED` (an error below the sensor noise is not
-    worth a model), and it removes :data:`GAIN_MIN` of what the others leave (the rule
-    a single must meet against the nominal model) -- or, for an effect, of what they
-    leave above the noise floor in one signal (:func:`_in_a_signal`; needs ``n``)."""
+    worth a model), it makes no signal significantly worse (:func:`_worsens`; needs
+    ``n``), and it removes :data:`GAIN_MIN` of what the others leave (the rule a single
+    must meet against the nominal model) -- or, for an effect, of what they leave above
+    the noise floor in one signal (:func:`_in_a_signal`; needs ``n``)."""
     removed = without.cost - with_.cost
-    if without.bic - with_.bic < DBIC_MIN or removed < MIN_REMOVED:
+    if without.bic - with_.bic < DBIC_MIN or removed < MIN_REMOVED \
+            or (n is not None and _worsens(without, with_, n)):
         return False
     return removed >= GAIN_MIN * without.cost or (
         n is not None and member is not None and member.effect != "parameter_error"
         and _in_a_signal(without, with_, n))
+
+
+def _signal_costs(without: SetScore, with_: SetScore) -> tuple[dict, dict]:
+    """The per-signal costs of both sets ({} when either lacks them)."""
+    a = without.result.signal_costs if without.result is not None else {}
+    b = with_.result.signal_costs if with_.result is not None else {}
+    return (a, b) if a and set(a) == set(b) else ({}, {})
+
+
+def _worsens(without: SetScore, with_: SetScore, n: float) -> bool:
+    """Whether adding the member makes some signal significantly worse (its information
+    criterion over that signal's ``n / signals`` observations rises by
+    :data:`DBIC_MIN`): the joint fit then trades that signal for the others, absorbing
+    what the others' model form leaves instead of adding physics, which fits every
+    signal at least as well. Measured (case 14 of ``designs/diagnose_concealed.py
+    --sets``, valve offset and 3.6 m lines): a 40 Hz spool lag beside the pair took
+    the position from 45.4 to 21.3 noise units -- below the concealed pair's own 37.9,
+    the line replay's mismatch -- while p_a rose from 1.73 to 2.46 (dBIC +125 over
+    p_a's 357 observations); it was named."""
+    return bool(_worse_signals(without, with_, n))
+
+
+def _worse_signals(without: SetScore, with_: SetScore, n: float) -> list[str]:
+    """The signals :func:`_worsens` finds significantly worse."""
+    a, b = _signal_costs(without, with_)
+    n_s = n / max(len(a), 1)
+    return [s for s in a if a[s] > 0 and b[s] > 0 and n_s * math.log(b[s] / a[s]) >= DBIC_MIN]
 
 
 def _in_a_signal(without: SetScore, with_: SetScore, n: float) -> bool:
@@ -434,9 +386,8 @@ def _in_a_signal(without: SetScore, with_: SetScore, n: float) -> bool:
     where heat transfer removes 15 % of the sum but halves what the lines leave above
     the floor in both pressures (p_a 1.59 -> 1.30, p_b 1.66 -> 1.34; the concealed
     pair at its true values: 1.24, 1.28)."""
-    a = without.result.signal_costs if without.result is not None else {}
-    b = with_.result.signal_costs if with_.result is not None else {}
-    if not a or set(a) != set(b):
+    a, b = _signal_costs(without, with_)
+    if not a:
         return False
     n_s = n / len(a)
     k = with_.k - without.k
@@ -609,53 +560,3 @@ def _as_chosen(best: SetScore, scores: Mapping[tuple[str, ...], SetScore],
                           f"nominal mismatch in the set {' + '.join(best.names)}")
         chosen.add(r)
     return chosen
-
-
-def by_member(joint: FitResult, members: Sequence[Candidate]) -> dict[str, dict[str, float]]:
-    """The joint fit's values split by member name."""
-    return {m.name: {f.key: joint.values[f.key] for f in m.free} for m in members}
-
-
-def _shows(name: str, by: Mapping[str, Candidate], masks: Mapping[str, np.ndarray]) -> str:
-    """Where candidate ``name``'s signature shows (:data:`.locate.EXPECTED`) and the
-    share of this recording's time spent there."""
-    regimes = EXPECTED.get(name, EXPECTED.get(by[name].effect, ())) if name in by else ()
-    if not regimes:
-        return "throughout"
-    union = None
-    for r in regimes:
-        m = masks.get(r)
-        if m is not None:
-            union = m.copy() if union is None else union | m
-    share = f" ({100 * float(np.mean(union)):.0f} % of this recording)" \
-        if union is not None and union.size else ""
-    return " / ".join(regimes) + share
-
-
-def tells_apart(a: Sequence[str], b: Sequence[str], by: Mapping[str, Candidate],
-                masks: Mapping[str, np.ndarray]) -> str:
-    """What data would separate explanation ``a`` from ``b`` (member names): the
-    operating regimes where the members that only one of them has show, with the share
-    of this recording spent in each (little time there: record more of it)."""
-    only_a = [m for m in a if m not in b] or list(a)
-    only_b = [m for m in b if m not in a] or list(b)
-    side = [" and ".join(f"{m} shows {_shows(m, by, masks)}" for m in ms)
-            for ms in (only_a, only_b)]
-    return f"{side[0]}; {side[1]}: a recording with more of those regimes separates them"
-
-
-def trade_offs(best: SetScore, by: Mapping[str, Candidate],
-               masks: Mapping[str, np.ndarray] | None = None) -> list[dict[str, Any]]:
-    """Pairs of values of different members whose joint-fit correlation exceeds
-    :data:`TRADE_OFF`, with the regimes where each member's signature shows and the
-    share of the recording spent there (data rich in those regimes tells them apart)."""
-    corr = best.result.corr if best.result is not None else {}
-    owner = {f.key: m for m in best.names for f in by[m].free}
-    out = []
-    for (a, b), c in corr.items():
-        if owner.get(a) == owner.get(b) or abs(c) < TRADE_OFF:
-            continue
-        out.append({"values": [a, b], "members": [owner[a], owner[b]],
-                    "correlation": round(float(c), 2),
-                    "tells_apart": tells_apart([owner[a]], [owner[b]], by, masks or {})})
-    return out
