@@ -72,6 +72,8 @@ STROKE_MARGIN = 0.05
 COMMAND_MARGIN = 0.05
 
 _HEADER_UNIT = re.compile(r"^\s*([^\[\(]+?)\s*[\[\(]\s*([^\]\)]+?)\s*[\]\)]\s*$")
+#: "x/mm": quantity over unit (ISO 80000-1), as axis labels and many loggers write it.
+_HEADER_SLASH = re.compile(r"^\s*([A-Za-z_]+)\s*/\s*([A-Za-z_]+)\s*$")
 
 
 def _convert_one(name: str, unit: str, source: str, location: str | None
@@ -184,7 +186,7 @@ def apply_units(columns: list[str], data: Mapping[str, np.ndarray],
     arrays = {c: np.asarray(data[c], dtype=np.float64) for c in columns}
     units: dict[str, tuple[str, str]] = {}   # column -> (unit, where it was given)
     for k, raw in enumerate(list(names)):
-        match = _HEADER_UNIT.match(raw)
+        match = _HEADER_UNIT.match(raw) or _HEADER_SLASH.match(raw)
         if match and match.group(1) in QUANTITY:
             base = match.group(1)
             if base in names:
