@@ -246,34 +246,6 @@ def test_an_input_inside_out_under_an_output_name_is_refused_before_the_work(rig
     assert sorted(p.name for p in out.iterdir()) == ["keep.txt", "plant.augmented.toml"]
 
 
-def test_two_experiments_are_diagnosed_together(rig, tmp_path):
-    """Two runs of the same rig with a concealed valve null offset of 0.12 V (other
-    references, other noise), given together: one finding for both, its value the
-    concealed one, and the fit of each run in details.json. The candidates are limited
-    to three (the joining of the runs is tested here, not the search)."""
-    import json
-
-    runs = []
-    for seed in (7, 8):
-        ref = synth.rich_reference(seed, 3.0, stroke=0.5)
-        rec = foreign_rig.record(rig.plant, ref, 3.0, seed=seed,
-                                 overrides={"valve.null_offset": 0.12})
-        runs.append(rec.to_csv(tmp_path / f"run{seed}.csv"))
-    out = tmp_path / "out"
-    code = main(["diagnose", str(rig.plant), *map(str, runs), "--out", str(out), "--quiet",
-                 "--no-report", "--effects", "valve_offset", "leakage", "dry_friction"])
-    assert code == 0
-    d = json.loads((out / "diagnosis.json").read_text())
-    assert [f["effect"] for f in d["findings"]] == ["valve_offset"]
-    # 5 %: the offset is seen through 20 um / 500 Pa noise in 6 s of closed loop; the
-    # single-run battery case found 0.2 V within 0.5 %
-    assert abs(d["findings"][0]["parameters"]["null_offset"] - 0.12) < 0.05 * 0.12
-    per_run = json.loads((out / "details.json").read_text())["recordings"]
-    assert [Path(r["recording"]).name for r in per_run] == ["run7.csv", "run8.csv"]
-    for r in per_run:   # the offset explains each run, not only their sum
-        assert r["fit_after"]["x"] > r["fit_before"]["x"]
-
-
 def test_dropped_samples_keep_the_logger_period_and_the_closed_loop(rig):
     """1 % of the samples dropped at random (a USB logger under load): the grid is the
     logger's 1 ms, not the mean step (1.01 ms, on which the 10 ms controller clock no

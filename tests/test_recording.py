@@ -674,6 +674,7 @@ def test_column_mapping_renames_and_converts(tmp_path):
 
 
 @pytest.mark.parametrize("header, meta", [("t,u,x [mm],p_a (bar)", ""),
+                                          ("t,u,x/mm,p_a / bar", ""),
                                           ("t,u,x,p_a", "# units: x=mm, p_a=bar\n")])
 def test_units_in_the_header_or_metadata(tmp_path, header, meta):
     rows = "".join(f"{float(a)!r},5.0,{float(b)!r},3.5\n"

@@ -35,7 +35,7 @@ import numpy as np
 
 from .errors import InputError
 from .recording_io import KNOWN_COLUMNS, REQUIRED_COLUMNS, Where, read_csv, read_mat, write_atomic
-from .recording_units import (apply_units, check_against_plant, check_plausible,
+from .recording_units import (apply_units, check_against_plant, check_plausible, time_hint,
                               parse_column_map, time_window)
 from .signals import FIT_SIGNALS, fit, fit_signals
 
@@ -581,7 +581,7 @@ def _validate(columns: tuple[str, ...], data: Mapping[str, np.ndarray],
         i = int(np.flatnonzero(~(steps > 0))[0]) + 1
         raise InputError(f"time is not strictly increasing: t = {float(t[i])!r} s at "
                          f"{where.sample(i)} comes after t = {float(t[i - 1])!r} s at "
-                         f"{where.sample(i - 1)}{_time_hint(steps)}", source=source,
+                         f"{where.sample(i - 1)}{time_hint(steps)}", source=source,
                          location=where.cell("t", i))
 
     low, high = PRESSURE_RANGE
@@ -621,26 +621,6 @@ def _map_hint(missing: list[str]) -> str:
     example = ",".join(f"{m}=COLUMN" for m in missing[:2])
     return (f" (a logger's own column names map with --columns {example}, with an "
             "optional unit: x=pos_mm:mm)")
-
-
-def _time_hint(steps: np.ndarray) -> str:
-    """Why a time column is not increasing, when its steps say it: stamps written with
-    too few digits repeat (many zero steps), a logger that restarts its clock for each
-    run steps back far (several experiments in one file)."""
-    zero, back = int(np.sum(steps == 0)), steps < 0
-    if zero > max(2, 0.01 * len(steps)):
-        pos = steps[steps > 0]
-        res = f" (resolution {float(np.min(pos)):.3g} s)" if len(pos) else ""
-        return (f"; {zero} of {len(steps)} steps repeat a time stamp: the time is written "
-                f"with too few digits{res}: write more digits")
-    if back.any():
-        k = int(np.argmax(back))
-        typical = float(np.median(steps[steps > 0])) if (steps > 0).any() else 0.0
-        if -steps[k] > 100 * typical > 0:
-            return (f"; the time steps back by {-float(steps[k]):.4g} s: several runs in "
-                    "one file? give each run as its own file (workbench diagnose takes "
-                    "several recordings of the same rig)")
-    return ""
 
 
 def _pressure_hint(lo: float, hi: float, count: int, n: int) -> str:

@@ -33,7 +33,7 @@ from .recording_io import Where
 __all__ = ["QUANTITY", "UNIT_SCALES", "JITTER_TOLERANCE", "GAP_FACTOR", "MAX_SAMPLE_STEP",
            "MAX_COMMAND", "MAX_POSITION", "STROKE_MARGIN", "COMMAND_MARGIN",
            "parse_column_map", "apply_units", "check_plausible", "check_against_plant",
-           "time_window"]
+           "time_window", "time_hint"]
 
 _P_ATM = 101325.0  # Pa, offset of gauge pressures
 
@@ -72,6 +72,8 @@ STROKE_MARGIN = 0.05
 COMMAND_MARGIN = 0.05
 
 _HEADER_UNIT = re.compile(r"^\s*([^\[\(]+?)\s*[\[\(]\s*([^\]\)]+?)\s*[\]\)]\s*$")
+#: "x/mm": quantity over unit (ISO 80000-1), as axis labels and many loggers write it.
+_HEADER_SLASH = re.compile(r"^\s*([A-Za-z_]+)\s*/\s*([A-Za-z_]+)\s*$")
 
 
 def _convert_one(name: str, unit: str, source: str, location: str | None
@@ -184,7 +186,7 @@ def apply_units(columns: list[str], data: Mapping[str, np.ndarray],
     arrays = {c: np.asarray(data[c], dtype=np.float64) for c in columns}
     units: dict[str, tuple[str, str]] = {}   # column -> (unit, where it was given)
     for k, raw in enumerate(list(names)):
-        match = _HEADER_UNIT.match(raw)
+        match = _HEADER_UNIT.match(raw) or _HEADER_SLASH.match(raw)
         if match and match.group(1) in QUANTITY:
             base = match.group(1)
             if base in names:
@@ -391,3 +393,23 @@ def time_window(data: dict[str, np.ndarray], window: Any, source: str, where: Wh
                          source=source, location=where.column("t"))
     first, last = int(keep[0]), int(keep[-1]) + 1
     return {k: v[first:last] for k, v in data.items()}, _Shifted(where, first)
+
+
+def time_hint(steps: np.ndarray) -> str:
+    """Why a time column is not increasing, when its steps say it: stamps written with
+    too few digits repeat (many zero steps), a logger that restarts its clock for each
+    run steps back far (several experiments in one file)."""
+    zero, back = int(np.sum(steps == 0)), steps < 0
+    if zero > max(2, 0.01 * len(steps)):
+        pos = steps[steps > 0]
+        res = f" (resolution {float(np.min(pos)):.3g} s)" if len(pos) else ""
+        return (f"; {zero} of {len(steps)} steps repeat a time stamp: the time is written "
+                f"with too few digits{res}: write more digits")
+    if back.any():
+        k = int(np.argmax(back))
+        typical = float(np.median(steps[steps > 0])) if (steps > 0).any() else 0.0
+        if -steps[k] > 100 * typical > 0:
+            return (f"; the time steps back by {-float(steps[k]):.4g} s: several runs in "
+                    "one file? give each run as its own file (workbench diagnose takes "
+                    "several recordings of the same rig)")
+    return ""
