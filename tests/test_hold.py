@@ -111,7 +111,15 @@ def test_beyond_full_opening_a_pulse_gets_longer():
     h = _hold(width=3)
     assert h.pulse_shape(0.5) == (3, 0.5)
     w, a = h.pulse_shape(1.2)                        # 3.6 opening-samples: 4 samples
-    assert w == 4 and a == pytest.approx(0.9)
+    assert w == 4 and a == 1.0
+    # fully open but the last sample, which gets the rest (0.6): the opening-time
+    # product is kept and grows continuously from one sample count to the next
+    seq = h.pulse_openings(1.2)
+    assert seq[:3] == (1.0, 1.0, 1.0) and seq[3] == pytest.approx(0.6, rel=1e-12)
+    assert h.pulse_openings(1.0 + 1e-6)[-1] == pytest.approx(3e-6, rel=1e-6)
+    assert h.pulse_openings(4 / 3)[-1] == pytest.approx(1.0, rel=1e-12)
+    for s in np.linspace(0.2, 4.0, 77):
+        assert sum(h.pulse_openings(s)) == pytest.approx(3 * s, rel=1e-12)
 
 
 def test_the_force_is_unloaded_before_a_pulse():
@@ -291,3 +299,19 @@ def test_pulses_and_unloading_scale_with_the_chambers_stiffness():
     # a pulse of strength s opens s / scale there; mid-stroke it opens s
     assert h.pulse_shape(0.3, 0.45)[1] == pytest.approx(0.3 / h.rate_scale(0.45), rel=1e-12)
     assert h.pulse_shape(0.3, 0.25)[1] == pytest.approx(0.3, rel=1e-12)
+
+
+
+def test_beyond_full_opening_the_strength_grows_by_at_most_half_a_sample():
+    # each sample of a stretched pulse adds the line-limited force rise to the bump's
+    # peak; x grow (1.5) from just below full opening would add 1.5 samples at once
+    h = _hold(width=3)
+    assert h._next({"a": 0.2, "lo+": 0.5}, +1.0) == pytest.approx(0.75)   # below 1: x grow
+    assert h._next({"a": 0.2, "lo+": 0.9}, +1.0) == pytest.approx(1.0 + 0.5 / 3)
+    assert h._next({"a": 0.2, "lo-": 1.2}, -1.0) == pytest.approx(1.2 + 0.5 / 3)
+    # half a sample: 3.5 opening-samples, the fourth half open
+    seq = h.pulse_openings(1.0 + 0.5 / 3)
+    assert len(seq) == 4 and seq[-1] == pytest.approx(0.5, rel=1e-12)
+    # the longest pulse still bounds it
+    h = _hold(width=3, max_width=4)
+    assert h._next({"a": 0.2, "lo+": 1.3}, +1.0) == pytest.approx(4 / 3)

@@ -43,7 +43,10 @@ What :class:`HoldPositioner` does instead, once the reference is still:
    it past the target's bin, bisected (geometric mean); x ``grow`` without an upper end,
    x ``shrink`` without a lower one. Beyond full opening a pulse gets longer (through
    1 m lines the chamber's force rise is limited by the line's flow: 0.45 and 0.67
-   opening gave the same 31 N bump on the precision rig).
+   opening gave the same 31 N bump on the precision rig), fully open but its last
+   sample, which is graded so the bump grows continuously with the strength, and by
+   at most half a sample per pulse (:meth:`HoldPositioner.pulse_openings`,
+   :meth:`HoldPositioner._next`).
 4. **Far off** (beyond ``range``), or the reference moving: the position law acts.
 
 Why it works on rigs the plant file does not describe exactly: nothing in the pulse
@@ -197,18 +200,35 @@ class HoldPositioner:
         return stiff(xc) / stiff(0.5 * L)
 
     def pulse_shape(self, strength: float, x: float | None = None) -> tuple[int, float]:
-        """(samples per half, opening) of a pulse of ``strength``: up to 1 the opening
-        of a ``width``-sample pulse; beyond, stretched to ceil(strength x ``width``)
-        samples with the opening that keeps the opening-time product
-        strength x ``width`` (through lines the force's rise is limited by the line's
-        flow, so beyond some opening only a longer pulse pushes harder). ``x`` m: the
-        strength is the mid-stroke one, divided by :meth:`rate_scale` there."""
+        """(samples per half, opening of its first sample) of a pulse of ``strength``
+        (:meth:`pulse_openings` gives every sample's). ``x`` m: the strength is the
+        mid-stroke one, divided by :meth:`rate_scale` there."""
+        seq = self.pulse_openings(strength, x)
+        return len(seq), seq[0]
+
+    def pulse_openings(self, strength: float, x: float | None = None) -> tuple:
+        """Openings of the forward half of a pulse of ``strength``, sample by sample.
+
+        Up to 1: ``width`` samples at that opening. Beyond: ceil(strength x ``width``)
+        samples, all fully open but the last, which opens by the rest of the
+        opening-time product strength x ``width``. Through lines the force's rise is
+        limited by the line's flow (0.45 and 0.67 opening gave the same 31 N bump on
+        the precision rig), so the bump's peak is set by how long the valve is open,
+        and a pulse stretched at a lower opening moved it by whole samples: 37.9, 49
+        and 61 N for 3, 4 and 5 samples (friction 1.5x, F_s = 37.5 N); the bisection
+        could not put a bump between them, and jumps of 0.33 and 1.2 mm alternated
+        (hold after the 0.3 s step: 52 command changes). With the graded last sample
+        the peak rises continuously with the strength from one sample count to the
+        next, so the bracket can close on the break-away. ``x`` m: as
+        :meth:`pulse_shape`.
+        """
         if x is not None:
             strength = strength / self.rate_scale(x)
         if strength <= 1.0:
-            return self.width, strength
-        w = int(math.ceil(self.width * strength - 1e-9))
-        return w, min(1.0, self.width * strength / w)
+            return (strength,) * self.width
+        total = self.width * strength
+        w = int(math.ceil(total - 1e-9))
+        return (1.0,) * (w - 1) + (min(1.0, total - (w - 1)),)
 
     def step(self, s: dict, r: float, y: dict,
              release: bool = False) -> tuple[dict, float | None]:
@@ -243,11 +263,12 @@ class HoldPositioner:
         still = s["still"] >= self.dwell_samples
         if s["mode"] == PULSE:
             s["k"] += 1
-            w, a = self.pulse_shape(s["a"], s["x0"])
+            seq = self.pulse_openings(s["a"], s["x0"])
+            w = len(seq)
             if s["k"] <= w:
-                return s, s["dir"] * a
+                return s, s["dir"] * seq[s["k"] - 1]
             if s["k"] <= w + int(math.ceil(self.reverse * w - 1e-9)):
-                return s, -s["dir"] * a
+                return s, -s["dir"] * seq[min(s["k"] - w, w) - 1]
             s["mode"], s["still"], s["pending"] = SETTLE, 0, True
             return s, 0.0
         if s["mode"] == TRACK:
@@ -342,13 +363,25 @@ class HoldPositioner:
         s["pending"] = False
 
     def _next(self, s: dict, direction: float) -> float:
-        """Strength of a pulse in ``direction`` from that direction's bracket."""
+        """Strength of a pulse in ``direction`` from that direction's bracket.
+
+        Without a ``hi`` the strength grows x ``grow``, but beyond full opening by at
+        most half a sample of full flow (0.5 / ``width``) per pulse: there each sample
+        adds the line-limited force rise to the bump's peak (about 11 N on the
+        precision rig, as much as its F_s - F_c), so x 1.5 from just below full
+        opening put the first bump that broke the piston away 20 N above its static
+        friction and jumped it 1.2 mm (friction 1.5x: 0.31 mm with the cap, the
+        hold's steady state 0.38 -> 0.04 mm).
+        """
         sign = "+" if direction > 0 else "-"
         lo, hi = s.get("lo" + sign, 0.0), s.get("hi" + sign, math.inf)
         if lo > 0 and math.isfinite(hi):
             return math.sqrt(lo * hi)
         if lo > 0:
-            return min(float(self.max_width) / self.width, lo * self.grow)
+            up = lo * self.grow
+            if up > 1.0:                     # stretched: at most half a sample more
+                up = min(up, max(1.0, lo) + 0.5 / self.width)
+            return min(float(self.max_width) / self.width, up)
         if math.isfinite(hi):
             return hi * self.shrink
         return s["a"]
