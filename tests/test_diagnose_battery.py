@@ -15,6 +15,7 @@ mass error (now the output says what the pressure level suggests).
 from __future__ import annotations
 
 import os
+from functools import partial
 import signal
 import subprocess
 import sys
@@ -218,7 +219,10 @@ def test_stopped_while_fitting_exits_with_the_signal_and_writes_nothing(rig, sig
     proc = subprocess.Popen([sys.executable, "-m", "workbench", "diagnose", str(rig.plant),
                              str(rig.csv), "--out", str(out), "--workers", "2"],
                             cwd=tmp_path, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            # Ctrl-C's default in the child: a shell's background job starts
+                            # with SIGINT ignored, and Python would keep ignoring it
+                            preexec_fn=partial(signal.signal, signal.SIGINT, signal.SIG_DFL))
     seen = []
     for line in proc.stderr:                # progress lines: wait for the fit to start
         seen.append(line)

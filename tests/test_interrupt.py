@@ -9,6 +9,7 @@ CasADi polls for signals inside CVODES and reports a Ctrl-C as an ordinary failu
 from __future__ import annotations
 
 import os
+from functools import partial
 import signal
 import subprocess
 import sys
@@ -47,7 +48,10 @@ def _start(args: list[str]) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     return subprocess.Popen([sys.executable, "-m", "workbench", *args], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True,
+                            # Ctrl-C's default in the child: a shell's background job starts
+                            # with SIGINT ignored, and Python would keep ignoring it
+                            preexec_fn=partial(signal.signal, signal.SIGINT, signal.SIG_DFL))
 
 
 def _children(pid: int) -> list[int]:
