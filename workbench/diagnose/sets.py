@@ -26,11 +26,8 @@ earns its place**: leaving it out (the set without it, also refitted) costs at l
 :data:`~.explain.DBIC_MIN`, i.e. the member is significant *given the others*
 (a member that only re-describes another's effect, or a wrong nominal value mistaken
 for new physics, fails this). Earning also needs a share: the member removes
-:data:`~.explain.GAIN_MIN` of what the others leave -- or, for an effect, of what they
-leave *above the noise floor* in one signal, significantly over that signal's
-observations (:func:`_in_a_signal`: a signal the others' model form cannot reach, e.g.
-the position beside lumped lines, otherwise dilutes a real effect's share); and no
-signal may get significantly worse with it (:func:`_worsens`). A member
+:data:`~.explain.GAIN_MIN` of what the others leave; and no signal may get
+significantly worse with it (:func:`_worsens`). A member
 must not earn by making up for its partner's fit stuck short of its optimum: the sets
 inside the best pair and the best triple are refitted again from that set's values
 with the member left out at its neutral values (:func:`_project_pairs`,
@@ -147,8 +144,7 @@ def search(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked]
     triples: set[tuple[str, ...]] = set()
     # a third member is looked for only around a pair whose two members both earn their
     # place (no two-effect explanation: no three-effect one is searched)
-    if best_pairs and all(_earns(scores[(b,)], best_pairs[0], n, by[_other(best_pairs[0], b)])
-                          for b in best_pairs[0].names) \
+    if best_pairs and all(_earns(scores[(b,)], best_pairs[0], n) for b in best_pairs[0].names) \
             and not out_of_time():
         bp = best_pairs[0].names
         thirds = {r.name for r in pool} | {m for s in best_pairs[1:4] for m in s.names}
@@ -209,9 +205,9 @@ def suggested(best: SetScore, scores: Mapping[tuple[str, ...], SetScore],
         (m,) = extra
         removed, dbic = best.cost - s.cost, best.bic - s.bic
         others_earn = all(scores.get(tuple(x for x in s.names if x != o)) is not None
-                          and _earns(scores[tuple(x for x in s.names if x != o)], s, n, by[o])
+                          and _earns(scores[tuple(x for x in s.names if x != o)], s, n)
                           for o in best.names)
-        if dbic < DBIC_MIN or removed < MIN_REMOVED or _earns(best, s, n, by.get(m)) \
+        if dbic < DBIC_MIN or removed < MIN_REMOVED or _earns(best, s, n) \
                 or _negligible(by.get(m), s.result, floor) or not others_earn:
             continue
         share = removed / best.cost
@@ -325,26 +321,17 @@ def _subset_points(s: tuple[str, ...], by: Mapping[str, Candidate],
     return points
 
 
-def _other(pair: SetScore, b: str) -> str:
-    """The member of ``pair`` that is not ``b``."""
-    return next(x for x in pair.names if x != b)
-
-
-def _earns(without: SetScore, with_: SetScore, n: float | None = None,
-           member: Candidate | None = None) -> bool:
+def _earns(without: SetScore, with_: SetScore, n: float | None = None) -> bool:
     """Whether a member earns its place: with it the BIC falls by :data:`DBIC_MIN` and
     it removes at least :data:`MIN_REMOVED` (an error below the sensor noise is not
     worth a model), it makes no signal significantly worse (:func:`_worsens`; needs
     ``n``), and it removes :data:`GAIN_MIN` of what the others leave (the rule a single
-    must meet against the nominal model) -- or, for an effect, of what they leave above
-    the noise floor in one signal (:func:`_in_a_signal`; needs ``n``)."""
+    must meet against the nominal model)."""
     removed = without.cost - with_.cost
     if without.bic - with_.bic < DBIC_MIN or removed < MIN_REMOVED \
             or (n is not None and _worsens(without, with_, n)):
         return False
-    return removed >= GAIN_MIN * without.cost or (
-        n is not None and member is not None and member.effect != "parameter_error"
-        and _in_a_signal(without, with_, n))
+    return removed >= GAIN_MIN * without.cost
 
 
 def _signal_costs(without: SetScore, with_: SetScore) -> tuple[dict, dict]:
@@ -372,27 +359,6 @@ def _worse_signals(without: SetScore, with_: SetScore, n: float) -> list[str]:
     a, b = _signal_costs(without, with_)
     n_s = n / max(len(a), 1)
     return [s for s in a if a[s] > 0 and b[s] > 0 and n_s * math.log(b[s] / a[s]) >= DBIC_MIN]
-
-
-def _in_a_signal(without: SetScore, with_: SetScore, n: float) -> bool:
-    """Whether the member removes :data:`GAIN_MIN` of what the others leave *above the
-    noise floor* (1 noise unit per signal) in some signal, significantly there (its
-    information criterion over that signal's ``n / signals`` independent observations
-    falls by :data:`DBIC_MIN`).
-
-    The share of the summed cost is diluted by a signal the others' model form cannot
-    reach: beside 3.6 m lines the exact structure replayed by the engine leaves the
-    position at 14 noise units (case 24 of ``designs/diagnose_concealed.py --sets``),
-    where heat transfer removes 15 % of the sum but halves what the lines leave above
-    the floor in both pressures (p_a 1.59 -> 1.30, p_b 1.66 -> 1.34; the concealed
-    pair at its true values: 1.24, 1.28)."""
-    a, b = _signal_costs(without, with_)
-    if not a:
-        return False
-    n_s = n / len(a)
-    k = with_.k - without.k
-    return any(a[s] - 1.0 > 0 and b[s] > 0 and a[s] - b[s] >= GAIN_MIN * (a[s] - 1.0)
-               and n_s * math.log(a[s] / b[s]) - k * math.log(n_s) >= DBIC_MIN for s in a)
 
 
 def _refine(refits: Refits, by: Mapping[str, Candidate], scores: dict, size: int,
@@ -433,8 +399,7 @@ def _project_pairs(refits: Refits, by: Mapping[str, Candidate], scores: dict, ma
         pairs = sorted((v for k, v in scores.items() if len(k) == 2 and v.result is not None
                         and v.bic < best1), key=lambda v: v.bic)
         pair = next((s for s in pairs
-                     if all((b,) in scores and _earns(scores[(b,)], s, n, by[_other(s, b)])
-                            for b in s.names)), None)
+                     if all((b,) in scores and _earns(scores[(b,)], s, n) for b in s.names)), None)
         if pair is None or pair.projected:
             break               # none, or the best one was projected and still earns
         pair.projected = True
@@ -524,7 +489,7 @@ def _select(scores: Mapping[tuple[str, ...], SetScore], cost0: float,
                 float("nan")
             s.own_of_rest[m] = (sub.cost - s.cost) / sub.cost if sub is not None \
                 and sub.cost > 0 else float("nan")
-            if sub is None or not _earns(sub, s, n, by.get(m)) \
+            if sub is None or not _earns(sub, s, n) \
                     or _negligible(by.get(m), s.result, floor):
                 s.earns = False
     ok = [s for s in scores.values() if s.names and s.earns
