@@ -429,14 +429,12 @@ def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool,
     ``estimate_lag`` s, the observer's time constant (FL's friction handover)."""
     prm = plant.params
     if kind == "nmpc":
-        from .mpc import NMPC, STATE_EFFECTS, rig_velocity_tolerance
+        from .mpc import NMPC, STATE_EFFECTS
         keep = [e for e in plant.effects if e not in STATE_EFFECTS
                 and e not in ("valve_deadband", "valve_offset")]
-        vt = rig_velocity_tolerance(plant)
         return NMPC.for_plant(plant, effects=keep, sample_time=T, max_speed=2.0,
                               horizon=nmpc_horizon(T), jit=jit, preview=preview,
-                              disturbance_gain=nmpc_disturbance_gain(T),
-                              **({} if vt is None else {"velocity_tolerance": vt}))
+                              disturbance_gain=nmpc_disturbance_gain(T))
     if kind == "fl":
         lam = bandwidth if bandwidth is not None else _fl_bandwidth(T)
         fl = _fl(plant, lam, T, preview)

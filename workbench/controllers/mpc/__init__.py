@@ -111,10 +111,10 @@ Layout
 """
 
 from .baselines import DoMPC, Recorder
-from .controller import NMPC, RIG_VELOCITY_TOLERANCE, rig_velocity_tolerance
+from .controller import NMPC
 from .fast import CompiledNMPC
 from .model import NMPC_STATES, STATE_EFFECTS, horizon_reference, prediction_model
 from .results import NMPCState, Solution, StepInfo
 
-__all__ = ["NMPC", "RIG_VELOCITY_TOLERANCE", "rig_velocity_tolerance", "CompiledNMPC", "NMPCState", "StepInfo", "Solution", "Recorder", "DoMPC", "prediction_model",
+__all__ = ["NMPC", "CompiledNMPC", "NMPCState", "StepInfo", "Solution", "Recorder", "DoMPC", "prediction_model",
            "horizon_reference", "STATE_EFFECTS", "NMPC_STATES"]

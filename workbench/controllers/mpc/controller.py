@@ -16,35 +16,7 @@ from .problem import Problem
 from .results import NMPCState, Solution
 from .update import advance, solution
 
-__all__ = ["NMPC", "RIG_VELOCITY_TOLERANCE", "rig_velocity_tolerance"]
-
-#: m/s, velocity-error scale of an NMPC on a rig with lines (:func:`rig_velocity_tolerance`).
-RIG_VELOCITY_TOLERANCE = 0.1
-
-
-def rig_velocity_tolerance(plant) -> float | None:
-    """Velocity-error scale (m/s) for an NMPC designed for ``plant`` (controllers.design):
-    :data:`RIG_VELOCITY_TOLERANCE`, twice the default, when the plant file has lines;
-    else None (the NMPC's default).
-
-    The velocity term weights (v - r') against the command's moves, so it is the plan's
-    derivative action, and the 4-state prediction lacks the lines' dynamics (their
-    delay and fill, 2.9 ms and more for 1 m): the plan then corrects velocity errors
-    faster than its commands reach the chambers. On the precision rig (2 ms loop, 1 m
-    lines) the command carried a 26 Hz oscillation of 0.57 V rms on the 0.5 Hz sine;
-    it is neither the sensors' noise (the same without pressure noise and with a
-    16-bit position sensor) nor there without the lines (0.1 m lines: a third of it).
-    Test profile of tests/test_precision_positioning.py, command minus its 50 ms moving
-    mean on the ramp and the sine, std, seeds 0-4: 0.62-0.94 V -> 0.33-0.42 V; worst
-    sine error 0.51-0.87 -> 0.52-0.91 mm; seed 2's hold limit cycle gone. 0.2 m/s:
-    0.35 V, 0.80 mm (seed 0); seeds 5-7 sine 0.51-0.74 -> 0.67-0.86 mm (neutral on the
-    sine over seeds 0-7: worst 0.87 -> 0.91 mm). Precision profile (--quick holds,
-    seed 0): 0.90 -> 0.44 V on the ramps, 0.76 -> 0.39 V on the sine, sine error
-    0.54 -> 0.60 mm. Without lines it is not needed, and on the deadband-only
-    25 mm rig (10 ms loop) the doubled tolerance let a hold drift 0.25 mm
-    (tests/test_mpc_deadband.py).
-    """
-    return RIG_VELOCITY_TOLERANCE if "line_dynamics" in set(plant.effects) else None
+__all__ = ["NMPC"]
 
 _MODES = ("rti", "sqp", "ipopt")
 _SENSITIVITIES = ("pade", "exact")
