@@ -210,6 +210,30 @@ def test_fl_friction_feedforward_at_a_reversal_decays_with_the_handover_lag(rig)
         replace(fl, friction_lag=-1.0)
 
 
+def _precision_sine():
+    """The precision rig's plant file and one period of its 60 mm 0.5 Hz sine, held
+    0.3 s before and 0.5 s after (the sine starts from rest, the piston stuck)."""
+    from workbench import references
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    c = 0.25
+    pts = [(0.0, c - 0.06), (0.3, c - 0.06)] + references.sine_points(0.3, c, 0.06, 0.5, 1)[1:]
+    pts += [(2.8, c - 0.06)]
+    p = references.profile(pts)
+    return plant, references.Reference(p.times, p.values, sections=(("sine", 0.3, 2.3),))
+
+
+def _sine_with_and_without_friction(kind: str, monkeypatch) -> tuple[float, float]:
+    """Worst error (m) on :func:`_precision_sine` of the ``kind`` design with its
+    friction terms, and with the plant file's friction hidden from the design."""
+    from workbench.controllers import compensation
+    from workbench.controllers.evaluation import evaluate_design
+    plant, ref = _precision_sine()
+    fed = evaluate_design(plant, kind, reference=ref, jit=False).validation.metrics.sine_error_max
+    monkeypatch.setattr(compensation.FrictionModel, "from_plant", classmethod(lambda cls, pl: None))
+    bare = evaluate_design(plant, kind, reference=ref, jit=False).validation.metrics.sine_error_max
+    return fed, bare
+
+
 def test_fl_friction_feedforward_reduces_the_sine_error_on_the_precision_rig(monkeypatch):
     # the precision rig (Karnopp 15/25 N, 2 % overlap, 1 m lines, 2 ms, 12-bit x, noisy
     # p, no v): without the feedforward the piston sticks 150-200 ms at each start and
@@ -221,18 +245,7 @@ def test_fl_friction_feedforward_reduces_the_sine_error_on_the_precision_rig(mon
     # With the break-away (feedback_linearizing.breakaway, branch h14h): this sine
     # 3.3 / 13.3 mm, the precision profile's 3.8-4.0 mm (seeds 0-1); required now at
     # most half (the margin for other seeds)
-    from workbench import references
-    from workbench.controllers import compensation
-    from workbench.controllers.evaluation import evaluate_design
-    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
-    c = 0.25
-    pts = [(0.0, c - 0.06), (0.3, c - 0.06)] + references.sine_points(0.3, c, 0.06, 0.5, 1)[1:]
-    pts += [(2.8, c - 0.06)]
-    p = references.profile(pts)
-    ref = references.Reference(p.times, p.values, sections=(("sine", 0.3, 2.3),))
-    fed = evaluate_design(plant, "fl", reference=ref, jit=False).validation.metrics.sine_error_max
-    monkeypatch.setattr(compensation.FrictionModel, "from_plant", classmethod(lambda cls, pl: None))
-    bare = evaluate_design(plant, "fl", reference=ref, jit=False).validation.metrics.sine_error_max
+    fed, bare = _sine_with_and_without_friction("fl", monkeypatch)
     assert fed < 0.5 * bare, (fed, bare)
 
 
@@ -342,18 +355,7 @@ def test_pid_break_away_and_friction_rate_cut_the_sine_error_on_the_precision_ri
     # precision profile, seed 0). Measured on this sine, seed 0: with / without
     # 3.2 / 10.6 mm; required: at most half (a margin for other seeds: the
     # precision profile's seeds 0-4 gave 3.3-3.4 mm with them)
-    from workbench import references
-    from workbench.controllers import compensation
-    from workbench.controllers.evaluation import evaluate_design
-    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
-    c = 0.25
-    pts = [(0.0, c - 0.06), (0.3, c - 0.06)] + references.sine_points(0.3, c, 0.06, 0.5, 1)[1:]
-    pts += [(2.8, c - 0.06)]
-    p = references.profile(pts)
-    ref = references.Reference(p.times, p.values, sections=(("sine", 0.3, 2.3),))
-    fed = evaluate_design(plant, "pid", reference=ref, jit=False).validation.metrics.sine_error_max
-    monkeypatch.setattr(compensation.FrictionModel, "from_plant", classmethod(lambda cls, pl: None))
-    bare = evaluate_design(plant, "pid", reference=ref, jit=False).validation.metrics.sine_error_max
+    fed, bare = _sine_with_and_without_friction("pid", monkeypatch)
     assert fed < 0.5 * bare, (fed, bare)
 
 
@@ -365,14 +367,8 @@ def test_fl_breaks_away_on_a_rig_with_more_friction_than_its_plant_file():
     # the force taken beyond F_s until the piston moves 3.5 / 7.1 mm. Measured on this
     # sine: 3.2 / 3.3 mm (seeds 0 / 1); the limit 5 mm pins that class (the nominal
     # rig's own error on it is 3.3 mm), far below the 15-17 mm without
-    from workbench import references
     from workbench.controllers.evaluation import evaluate_design
-    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
-    c = 0.25
-    pts = [(0.0, c - 0.06), (0.3, c - 0.06)] + references.sine_points(0.3, c, 0.06, 0.5, 1)[1:]
-    pts += [(2.8, c - 0.06)]
-    p = references.profile(pts)
-    ref = references.Reference(p.times, p.values, sections=(("sine", 0.3, 2.3),))
+    plant, ref = _precision_sine()
     rig = plant.with_params(**{"friction.coulomb": 22.5, "friction.static": 37.5,
                                "load.mass": 1.32})
     ev = evaluate_design(plant, "fl", reference=ref, jit=False, rig=rig)

@@ -129,6 +129,25 @@ class DesignEvaluation:
         return all(h["peak_to_peak"] <= h["quantum"] + 1e-12
                    and h["command_changes"] <= LOCK_EVENTS for h in self.holds)
 
+    def command_activity(self, sections=None, window: float = 0.025) -> float:
+        """V, std of the command minus its ``window`` s moving mean (centred), over the
+        time ``sections`` ((start, end) s pairs; None: wherever the reference moves,
+        i.e. the ramps and the sine). The part of the command faster than any motion
+        the profile asks for: chatter; NaN if no sample is selected."""
+        tr = self.validation.trajectory
+        t = np.asarray(tr.time, dtype=float)
+        u = np.asarray(tr["u"], dtype=float).ravel()
+        n = max(int(round(window / float(np.median(np.diff(t))))), 1)
+        hf = u - np.convolve(u, np.ones(n) / n, mode="same")
+        if sections is None:
+            r = np.asarray(tr["r"], dtype=float).ravel()
+            sel = np.abs(np.gradient(r, t)) > 1e-6          # m/s: the reference moves
+        else:
+            sel = np.zeros(t.shape, dtype=bool)
+            for a, b in sections:
+                sel |= (t > a) & (t < b)
+        return float(np.std(hf[sel])) if sel.any() else math.nan
+
     def _lead(self) -> float:
         """s, the hand-over before a move that the hold evidence leaves out."""
         return float(getattr(self.controller.inner, "lead", 0.0))
@@ -168,6 +187,8 @@ class DesignEvaluation:
                                     f"m/s^2, {self.limits.jerk:.4g} m/s^3"),
               ("sensors", f"position quantum {self.quantum * 1e3:.4f} mm, pressure noise "
                           f"{self.pressure_noise:g} Pa (std), no velocity"),
+              ("command activity", f"{self.command_activity():.2f} V while the reference "
+                                   "moves (std of the command less its 25 ms moving mean)"),
               ("per-sample computation", f"median {self.median_update_ms:.3f} ms, 99 % "
                                          f"{np.percentile(self.update_times, 99) * 1e3:.3f} ms")]
         rows = _check_rows(v)
