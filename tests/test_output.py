@@ -238,23 +238,29 @@ def test_rls_tiny_forgetting_is_refused_and_nothing_written(tmp_path, arx_csv, c
 def test_library_blocks_leave_sigterm_and_custom_handlers_alone():
     import signal
     from workbench.output import stop_on_signals
-    term = signal.getsignal(signal.SIGTERM)
-    with stop_on_signals():                      # a library call (simulate, replay, ...)
-        assert signal.getsignal(signal.SIGTERM) is term
-        assert signal.getsignal(signal.SIGINT) is not signal.default_int_handler
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-
-    def mine(signum, frame):
-        pass
-    old = signal.signal(signal.SIGINT, mine)
+    # Python's own Ctrl-C handler, as in a terminal (a test run started as a shell's
+    # background job has SIGINT ignored, which the blocks leave alone as well)
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        with stop_on_signals(sigterm=True):      # the command line
-            assert signal.getsignal(signal.SIGINT) is mine
-            if term is signal.SIG_DFL:           # (a test runner may have its own)
-                assert signal.getsignal(signal.SIGTERM) is not term
-        assert signal.getsignal(signal.SIGTERM) is term
+        term = signal.getsignal(signal.SIGTERM)
+        with stop_on_signals():                      # a library call (simulate, replay, ...)
+            assert signal.getsignal(signal.SIGTERM) is term
+            assert signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+        def mine(signum, frame):
+            pass
+        old = signal.signal(signal.SIGINT, mine)
+        try:
+            with stop_on_signals(sigterm=True):      # the command line
+                assert signal.getsignal(signal.SIGINT) is mine
+                if term is signal.SIG_DFL:           # (a test runner may have its own)
+                    assert signal.getsignal(signal.SIGTERM) is not term
+            assert signal.getsignal(signal.SIGTERM) is term
+        finally:
+            signal.signal(signal.SIGINT, old)
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.signal(signal.SIGINT, before)
 
 
 def test_a_run_that_cannot_fit_in_memory_is_refused_before_allocating():
