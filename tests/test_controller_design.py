@@ -393,3 +393,16 @@ def test_report_table_has_one_number_format_per_unit():
     assert [r[3] for r in rows] == ["23.150", "0.920", "2.36", "0.324", "3.119", "inf"]
     assert [r[2] for r in rows] == ["s", "s", "%", "mm", "bar abs", "s"]
     assert [r[4] for r in rows] == [True, True, False, False, True, False]
+
+
+def test_friction_slope_is_the_derivative_of_the_law():
+    # central differences at tight step (the truncation error h^2 F'''/6 is ~1e-9
+    # relative at h = 1e-5 v_e) against the exact slope, across the tanh, the
+    # Stribeck hump and the sliding range
+    from workbench.controllers.compensation import FrictionModel
+    fr = FrictionModel(15.0, 25.0, 0.012)
+    v = np.array([-0.05, -0.012, -2e-3, -1e-4, 0.0, 3e-4, 1.2e-3, 0.006, 0.02, 0.3])
+    h = 1e-5 * 0.1 * fr.stribeck_velocity
+    fd = (fr(v + h) - fr(v - h)) / (2 * h)
+    assert np.allclose(fr.slope(v), fd, rtol=1e-6, atol=1e-6)
+    assert fr.slope(0.0) == pytest.approx(25.0 / (0.1 * 0.012), rel=1e-12)  # F_s / v_e

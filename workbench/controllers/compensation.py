@@ -163,6 +163,18 @@ class FrictionModel:
         """Friction force, N, along -x for v > 0 (m/s)."""
         return friction_force(v, self.coulomb, self.static, self.stribeck_velocity)
 
+    def slope(self, v) -> np.ndarray | float:
+        """dF/dv (N s/m) of :meth:`__call__` at ``v`` (m/s), exact: with s = tanh(v/v_e),
+        v_e = v_s / 10, and g = F_c + (F_s - F_c) exp(-(v/v_s)^2), F = g s and
+        F' = g (1 - s^2) / v_e - 2 v (F_s - F_c) exp(-(v/v_s)^2) s / v_s^2."""
+        v = np.asarray(v, dtype=float)
+        vs = self.stribeck_velocity
+        ve = 0.1 * vs
+        s = np.tanh(v / ve)
+        ex = (self.static - self.coulomb) * np.exp(-(v / vs) ** 2)
+        out = (self.coulomb + ex) * (1.0 - s * s) / ve - 2.0 * v * ex * s / vs ** 2
+        return float(out) if out.ndim == 0 else out
+
     def to_dict(self) -> dict[str, float]:
         return {"coulomb": self.coulomb, "static": self.static,
                 "stribeck_velocity": self.stribeck_velocity}

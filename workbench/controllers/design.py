@@ -245,8 +245,7 @@ class VelocityPID:
         fr, c = self.friction, self.force_rate
         if fr is None or c <= 0 or self.force_time <= 0 or "d" not in y or "a" not in y:
             return 0.0, None
-        h = 1e-3 * fr.stribeck_velocity
-        u = (float(fr(r1 + h)) - float(fr(r1 - h))) / (2 * h) * r2 / c
+        u = float(fr.slope(r1)) * r2 / c
         x, v = float(y["x"]), float(y["v"])
         brk = breakaway(brk, r1, v,
                         float(y.get("x_measured", x)), fr.stribeck_velocity)

@@ -472,8 +472,10 @@ class FeedbackLinearizing:
         lag = self.friction_lag
         if isinstance(lag, bool) or not isinstance(lag, (int, float)) or not (math.isfinite(lag) and lag >= 0):
             raise InputError(f"friction_lag must be >= 0 s, got {lag!r}")
-        if self.friction is not None and not callable(self.friction):
-            raise InputError("friction must be a law v (m/s) -> force (N), e.g. a FrictionModel")
+        if self.friction is not None and not (callable(self.friction) and all(
+                hasattr(self.friction, k) for k in ("slope", "static", "coulomb"))):
+            raise InputError("friction must be a law v (m/s) -> force (N) with its slope and "
+                             "static / Coulomb levels: a FrictionModel")
         if self.reference is None:
             object.__setattr__(self, "reference",
                                ReferenceModel(self.bandwidth, self.damping, self.sample_time))
@@ -489,10 +491,8 @@ class FeedbackLinearizing:
 
     def _friction_rate(self, tgt) -> float:
         """Jerk (m/s^3) that the model friction's rate at the reference adds:
-        dF(v_r)/dt / m = F'(v_r) a_r / m (central difference of the smooth law)."""
-        h = 1e-3 * float(getattr(self.friction, "stribeck_velocity", 1e-3))
-        slope = (float(self.friction(tgt[1] + h)) - float(self.friction(tgt[1] - h))) / (2 * h)
-        return slope * float(tgt[2]) / self.model.mass
+        dF(v_r)/dt / m = F'(v_r) a_r / m (:meth:`~.compensation.FrictionModel.slope`)."""
+        return float(self.friction.slope(tgt[1])) * float(tgt[2]) / self.model.mass
 
     def _friction_feedforward(self, f_lag, v_r: float, fr_prev=None) -> tuple[float, float, float]:
         """(feedforward force N, new lagged friction N, friction fed N) for the
