@@ -28,7 +28,7 @@ from .references import Reference
 if TYPE_CHECKING:  # pragma: no cover
     from .validate import Specification
 
-__all__ = ["Segment", "SegmentMetrics", "find_segments", "segment_metrics", "trapezoid"]
+__all__ = ["Segment", "SegmentMetrics", "find_segments", "segment_metrics", "trapezoid", "window_mean"]
 
 #: Two reference values closer than this (m) are the same level.
 _LEVEL_TOL = 1e-12
@@ -182,6 +182,15 @@ def trapezoid(y: np.ndarray, t: np.ndarray) -> float:
     return float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
 
 
+def window_mean(y: np.ndarray, t: np.ndarray) -> float:
+    """Time mean of samples ``y`` over their instants ``t`` (s): the trapezoidal
+    integral over the span, the plain mean if the span is a single instant (NaN for
+    no sample)."""
+    if len(t) > 1 and t[-1] > t[0]:
+        return trapezoid(y, t) / float(t[-1] - t[0])
+    return float(np.mean(y)) if len(y) else math.nan
+
+
 def _first_crossing(t: np.ndarray, y: np.ndarray, level: float) -> float:
     """First time (linear interpolation) at which ``y`` reaches ``level`` from below."""
     above = np.flatnonzero(y >= level)
@@ -247,8 +256,7 @@ def segment_metrics(time: np.ndarray, x: np.ndarray, reference: Reference,
             else:
                 win = tt >= tt[-1] - w - 1e-9
             ew, tw = e[win], tt[win]
-            kw["steady_state_error"] = (trapezoid(ew, tw) / (tw[-1] - tw[0])
-                                        if len(tw) > 1 and tw[-1] > tw[0] else float(np.mean(ew)))
+            kw["steady_state_error"] = window_mean(ew, tw)
         if seg.kind == "step":
             size = seg.size
             sgn = math.copysign(1.0, size)

@@ -87,14 +87,12 @@ def hold_evidence(validation, quantum: float, lead: float = 0.0) -> list[dict[st
 
 def _steady_state(tr, seg, window: float, lead: float) -> float:
     """Time mean of |r - x| (m) over ``window`` s ending ``lead`` s before the end of
-    the hold ``seg`` (r its end value; trapezoidal, as workbench.metrics)."""
+    the hold ``seg`` (r its end value; :func:`workbench.metrics.window_mean`)."""
+    from ..metrics import window_mean
     t = np.asarray(tr.time, dtype=float)
     end = max(seg.end - lead, seg.start + window)
     sel = (t >= end - window - 1e-9) & (t <= end + 1e-9)
-    tt, e = t[sel], np.abs(seg.r_end - np.asarray(tr["x"], dtype=float)[sel])
-    if len(tt) < 2 or tt[-1] <= tt[0]:
-        return float(np.mean(e)) if len(e) else math.nan
-    return float(np.trapezoid(e, tt) / (tt[-1] - tt[0]))
+    return window_mean(np.abs(seg.r_end - np.asarray(tr["x"], dtype=float)[sel]), t[sel])
 
 
 @dataclass(frozen=True, eq=False)
