@@ -473,7 +473,7 @@ MUTATIONS: tuple[Mutation, ...] = (
        "return float(t[k] + frac * (t[k + 1] - t[k]))",
        "settling time absolute instead of from the step", CORE_MET),
     _m("metrics-sse-integral", "core", "workbench/metrics.py",
-       "trapezoid(ew, tw) / (tw[-1] - tw[0])", "trapezoid(ew, tw)",
+       "return trapezoid(y, t) / float(t[-1] - t[0])", "return trapezoid(y, t)",
        "steady-state error the integral, not the mean, over the window", CORE_MET),
     _m("metrics-trapezoid", "core", "workbench/metrics.py",
        "0.5 * (y[1:] + y[:-1])", "0.5 * (y[1:] + y[1:])",

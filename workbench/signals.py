@@ -66,7 +66,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .recording import Recording
 
 __all__ = [
-    "noise_floor", "quantisation_step", "savgol", "smooth", "derivative", "odd_window",
+    "dilate", "noise_floor", "quantisation_step", "savgol", "smooth", "derivative", "odd_window",
     "fit", "fit_signals", "FIT_SIGNALS", "CONFIDENCE_Z99", "WHITENESS_LEVEL", "correlation_band",
     "autocorrelation", "cross_correlation", "ljung_box", "independence_test", "fraction_outside",
 ]
@@ -437,3 +437,15 @@ def fraction_outside(r: Any, n: int, band: float | None = None) -> float:
     b = correlation_band(n) if band is None else float(band)
     with np.errstate(invalid="ignore"):
         return float(np.mean(np.abs(r) > b))
+
+
+def dilate(mask: np.ndarray, reach: int) -> np.ndarray:
+    """Boolean ``mask`` widened by ``reach`` samples on each side (a copy).
+
+    >>> dilate(np.array([0, 0, 1, 0, 0, 0], dtype=bool), 1).astype(int).tolist()
+    [0, 1, 1, 1, 0, 0]
+    """
+    mask = np.asarray(mask, dtype=bool)
+    if reach <= 0 or not mask.any():
+        return mask.copy()
+    return np.convolve(mask.astype(float), np.ones(2 * reach + 1), mode="same") > 0.5

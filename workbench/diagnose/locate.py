@@ -23,6 +23,7 @@ from typing import Mapping
 
 import numpy as np
 
+from ..signals import dilate
 from .data import Prepared
 
 __all__ = ["REGIMES", "EXPECTED", "regimes", "concentration", "intervals", "smooth_error",
@@ -49,12 +50,6 @@ EXPECTED: dict[str, tuple[str, ...]] = {
 }
 
 
-def _dilate(mask: np.ndarray, k: int) -> np.ndarray:
-    if k <= 1:
-        return mask
-    return np.convolve(mask.astype(float), np.ones(k), mode="same") > 0
-
-
 def regimes(prep: Prepared, v_rest: float) -> dict[str, np.ndarray]:
     """Boolean masks of the operating regimes (see the module docstring)."""
     n = prep.n
@@ -75,7 +70,7 @@ def regimes(prep: Prepared, v_rest: float) -> dict[str, np.ndarray]:
     flips = flips[last[flips - 1] != 0]
     rev = np.zeros(n, dtype=bool)
     rev[flips] = True
-    reversal = _dilate(rev, 2 * k50 + 1)
+    reversal = dilate(rev, k50)
     u = np.asarray(prep.rec["u"], dtype=float)
     s = (u - prm["valve.command_center"]) / prm["valve.command_span"]
     centre = np.abs(s) < 0.05

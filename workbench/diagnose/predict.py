@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..recording import fit
+from ..signals import dilate
 from .data import Prepared
 from .engine import INPUT_ROWS, EngineInputs
 
@@ -322,13 +323,6 @@ REFINE_STEPS = False
 EVENT_REACH = 2
 
 
-def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:
-    """``mask`` widened by ``reach`` samples on each side."""
-    if reach <= 0 or not mask.any():
-        return mask.copy()
-    return np.convolve(mask.astype(float), np.ones(2 * reach + 1), mode="same") > 0.5
-
-
 def friction_events(prep: Prepared, index: np.ndarray, reach: int = EVENT_REACH
                     ) -> np.ndarray:
     """Simulated samples (positions in ``index``) at a friction event of the recording:
@@ -354,7 +348,7 @@ def friction_events(prep: Prepared, index: np.ndarray, reach: int = EVENT_REACH
     prev = np.concatenate(([-1], last[:-1]))
     flip = moving & (prev >= 0) & (sign != sign[np.maximum(prev, 0)])
     ev |= flip
-    return _dilate(ev, reach)
+    return dilate(ev, reach)
 
 
 def settle_refinement(pred: Predictor, run, reach: int = EVENT_REACH) -> np.ndarray:
@@ -375,7 +369,7 @@ def settle_refinement(pred: Predictor, run, reach: int = EVENT_REACH) -> np.ndar
     pred.inputs = pred.inputs.with_rows(refine=ev.astype(float))
     Y = run(pred)
     flags = np.nan_to_num(np.asarray(Y[-1], dtype=float)) > 0.5
-    mask = ev | _dilate(flags, reach)
+    mask = ev | dilate(flags, reach)
     if np.array_equal(mask, ev):
         return Y
     pred.inputs = pred.inputs.with_rows(refine=mask.astype(float))
