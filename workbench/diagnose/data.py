@@ -65,6 +65,10 @@ class Prepared:
         varies (:func:`supply_profile`); else None (the plant's constant).
     parts, starts : several recordings joined (:func:`prepare_many`): each prepared
         alone, and the sample where each starts.
+    recorded : per signal, a boolean mask of the samples where it was recorded, when
+        recordings with different signals are joined (a signal of ``signals`` that one
+        of them lacks: NaN in :meth:`measured` there); empty when every signal is
+        recorded throughout (:meth:`mask`).
     """
 
     plant: Plant
@@ -94,6 +98,7 @@ class Prepared:
     supply: np.ndarray | None = None
     parts: list["Prepared"] = field(default_factory=list, repr=False)
     starts: list[int] = field(default_factory=list)
+    recorded: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @property
     def n(self) -> int:
@@ -121,7 +126,35 @@ class Prepared:
             else {}
 
     def measured(self, name: str) -> np.ndarray:
+        """The recorded signal ``name`` (x m, p_a/p_b Pa); NaN where it was not recorded
+        (several recordings with different signals, :meth:`mask`)."""
         return {"x": self.x, "p_a": self.p_a, "p_b": self.p_b}[name]
+
+    def filled(self, name: str) -> np.ndarray:
+        """:meth:`measured` with the smoothed estimate where it was not recorded (for
+        filters that need every sample; compare only where :meth:`mask` is True)."""
+        y = self.measured(name)
+        return y if name not in self.recorded else np.where(
+            self.recorded[name], y, self.xs if name == "x" else self.smoothed(name))
+
+    def mask(self, name: str) -> np.ndarray:
+        """Boolean mask of the samples where signal ``name`` was recorded (all of them
+        but where a recording joined with others lacks it, :func:`prepare_many`)."""
+        m = self.recorded.get(name)
+        return np.ones(self.n, dtype=bool) if m is None else m
+
+    def pressure_anchor(self) -> np.ndarray:
+        """Samples where at least one chamber pressure was recorded: there the
+        predictions may re-anchor both (the other one estimated, :func:`other_side`);
+        elsewhere the model's pressures run on, as for a position-only recording."""
+        m = np.zeros(self.n, dtype=bool)
+        for s in self.pressures:
+            m |= self.mask(s)
+        return m
+
+    def signals_at(self, i: int) -> tuple[str, ...]:
+        """The signals recorded at sample ``i``."""
+        return tuple(s for s in self.signals if self.mask(s)[i])
 
     def smooth_x(self, y: np.ndarray) -> np.ndarray:
         """The smoothing applied to the acceleration (for model rates of v)."""
@@ -494,21 +527,20 @@ def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Pre
     recording use them) and ``starts`` their first samples in the joined one: the
     predictions are re-anchored there (:func:`workbench.diagnose.core.diagnose`).
 
+    Recordings with different measured signals (one with x, p_a, p_b, one with x only,
+    one with p_a only) are joined on the signals they share and each other signal is
+    kept where it was recorded (:func:`_with_all_signals`): it counts only there.
+
     Raises
     ------
     InputError
-        No recording, or recordings with different measured signals (x, p_a, p_b).
+        No recording.
     """
     if not recs:
         raise InputError("no recording given: a diagnosis needs at least one")
     if len(recs) == 1:
         return prepare(plant, recs[0], mode)
     parts = [prepare(plant, r, mode) for r in recs]
-    if len({p.signals for p in parts}) > 1:
-        which = "; ".join(f"{p.rec.source}: {', '.join(p.signals)}" for p in parts)
-        raise InputError("recordings diagnosed together must measure the same signals "
-                         f"({which}): diagnose them separately, or drop the extra columns",
-                         source=parts[-1].rec.source)
     closed, some_closed = all(p.closed for p in parts), any(p.closed for p in parts)
     mode = "closed" if closed else "open"
     dt = parts[0].dt
@@ -528,6 +560,9 @@ def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Pre
         metadata={"sample_time": repr(dt)},
         **{c: np.concatenate([np.asarray(r[c], dtype=float) for r in pieces]) for c in cols})
     prep = prepare(plant, joined, mode, starts)
+    mixed = len({p.signals for p in parts}) > 1
+    if mixed:
+        prep = _with_all_signals(prep, parts, starts)
     prep.parts = parts
     notes = [f"{len(parts)} recordings diagnosed together (one model for all; fit per "
              "recording in details.json): " + ", ".join(
@@ -535,7 +570,71 @@ def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Pre
     if some_closed and not closed:
         notes.append("not every recording can be replayed in closed loop: all are replayed "
                      "open loop on u, re-anchored")
+    if mixed:
+        notes.append(_mixed_note(parts))
     for p in parts:       # (a part's "short recording" is not the joined one's)
-        notes += [n for n in p.notes if n not in notes and not n.startswith("short record")]
-    prep.notes = notes + [n for n in prep.notes if n not in notes]
+        notes += [(f"{p.rec.source}: {n}" if mixed and n.startswith("the recording has")
+                   else n) for n in p.notes
+                  if n not in notes and not n.startswith("short record")
+                  and not (mixed and n.startswith("the recording has no chamber"))]
+    prep.notes = notes + [n for n in prep.notes if n not in notes
+                          and not (mixed and n.startswith("the recording has"))]
     return prep
+
+
+def _mixed_note(parts: list[Prepared]) -> str:
+    """What a set of recordings with different signals gives the diagnosis, in words."""
+    which = "; ".join(f"{p.rec.source}: {', '.join(p.signals)}" for p in parts)
+    return ("the recordings measure different signals (" + which + "): each signal is "
+            "compared only where it was recorded, so the pressures of one recording and "
+            "the position of another inform the one model; the noise of each signal is "
+            "that of the recordings that have it; where no chamber pressure is recorded "
+            "the predictions run on the model's pressures, as for a position-only "
+            "recording, and the flow and force witnesses are left out")
+
+
+def _with_all_signals(prep: Prepared, parts: list[Prepared], starts: list[int]) -> Prepared:
+    """The joined ``prep`` (prepared on the signals every part shares) given every
+    signal some part recorded, each where it was recorded (``Prepared.recorded``).
+
+    Per chamber pressure: the measurement where recorded, NaN elsewhere; its rate
+    likewise; the smoothed value (the predictions' anchors and the observer's input)
+    the part's own (its force-balance estimate where the part has the other side
+    only, :func:`other_side`) or, in a part with no pressure, the plant's equilibrium
+    at the part's first position (what a position-only recording alone starts from,
+    :meth:`workbench.plant.Plant.initial_state`; the predictions re-anchor on it only
+    at the part's start). The noise of a signal is the median over the parts that
+    have it (each part's own, :func:`prepare`).
+    """
+    from dataclasses import replace
+    n = prep.n
+    cuts = list(starts) + [n]
+    spans = list(zip(cuts[:-1], cuts[1:]))
+    union = tuple(s for s in ("x", "p_a", "p_b") if any(s in p.signals for p in parts))
+    fields: dict[str, Any] = {"signals": union, "noise": dict(prep.noise), "recorded": {}}
+    plant = prep.plant
+    ia, ib = plant.state_index("p_a"), plant.state_index("p_b")
+    for side in union[1:]:
+        short = side[-1]
+        meas, sm, rate = np.full(n, np.nan), np.empty(n), np.full(n, np.nan)
+        mask = np.zeros(n, dtype=bool)
+        for p, (a, b) in zip(parts, spans):
+            if side in p.signals:
+                meas[a:b], rate[a:b] = p.measured(side), getattr(p, f"dp{short}")
+                mask[a:b] = True
+            if p.pressures:
+                sm[a:b] = p.smoothed(side)
+            else:
+                z = plant.initial_state(float(np.clip(p.xs[0], 0.0, plant.stroke)))
+                sm[a:b] = z[ia] if side == "p_a" else z[ib]
+        fields[side], fields[f"p{short}s"], fields[f"dp{short}"] = meas, sm, rate
+        fields["recorded"][side] = mask
+        fields["noise"][side] = float(np.median([p.noise[side] for p in parts
+                                                 if side in p.signals]))
+    for side in ("p_a", "p_b"):       # a side no part recorded: its estimate, if any
+        if side not in union and any(p.pressures for p in parts):
+            fields[f"p{side[-1]}s"] = np.concatenate(
+                [p.smoothed(side) if p.pressures else
+                 np.full(b - a, plant.initial_state(float(np.clip(p.xs[0], 0.0, plant.stroke)))
+                         [ia if side == "p_a" else ib]) for p, (a, b) in zip(parts, spans)])
+    return replace(prep, **fields)

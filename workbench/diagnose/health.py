@@ -130,7 +130,9 @@ def check_replay(t: np.ndarray, measured: Mapping[str, np.ndarray],
                                 f"({_spans(t, bad)})")
             chk.fits[s] = float("nan")
             continue
-        chk.fits[s] = fit(np.asarray(measured[s], dtype=float), y)
+        meas = np.asarray(measured[s], dtype=float)
+        rec = np.isfinite(meas)          # NaN: not recorded there (several recordings)
+        chk.fits[s] = fit(meas[rec], y[rec]) if rec.sum() > 2 else float("nan")
         if np.isfinite(chk.fits[s]) and chk.fits[s] < 0.0:
             chk.worse.append(f"{s} at {chk.fits[s]:.3g} %")
     x = np.asarray(sim["x"], dtype=float)
@@ -337,7 +339,8 @@ def gauge_hint(prep: Prepared, sim0: Mapping[str, np.ndarray]) -> str:
         y = np.asarray(sim0.get(s, ()), dtype=float)
         if y.shape != prep.measured(s).shape or not np.isfinite(y).all():
             return ""
-        offsets[s] = float(np.median(y - prep.measured(s)))
+        rec = prep.mask(s)
+        offsets[s] = float(np.median(y[rec] - prep.measured(s)[rec]))
     if not offsets or any(abs(d / p_atm - 1.0) > GAUGE_BAND for d in offsets.values()):
         return ""
     said = ", ".join(f"{s} by {d / 1e5:.2f} bar" for s, d in offsets.items())
@@ -437,7 +440,8 @@ def verdict(prep: Prepared, sim0: Mapping[str, np.ndarray], findings: Sequence[s
     rest = masks.get("at rest")
     if rest is not None:
         for s in prep.signals:
-            slow = rest_noise(prep.measured(s), rest, int(round(REST_WINDOW / prep.dt)))
+            slow = rest_noise(prep.measured(s), rest & prep.mask(s),
+                              int(round(REST_WINDOW / prep.dt)))
             unit = "m" if s == "x" else "Pa"
             if slow > COLOURED_FACTOR * noise.get(s, 0.0):
                 notes.append(

@@ -89,6 +89,7 @@ class LeakFloor:
         p = np.concatenate([np.asarray(prep.measured(s), dtype=float) for s in sides])
         pa, pb = prep.smoothed("p_a"), prep.smoothed("p_b")
         dp = np.abs(np.asarray(pa, dtype=float) - np.asarray(pb, dtype=float))
+        dp = dp[prep.pressure_anchor()]     # where a pressure was recorded
         horizon = len(shpe.index) / shpe.windows * shpe.step * prep.dt
         return cls(sigma_p=min(float(shpe.sigma[s]) for s in sides), horizon=float(horizon),
                    volume=float(volume),

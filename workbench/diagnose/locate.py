@@ -79,9 +79,11 @@ def regimes(prep: Prepared, v_rest: float) -> dict[str, np.ndarray]:
     high = np.abs(s) > max(float(np.quantile(np.abs(s), 0.9)), 0.05)
     out = {"at rest": rest, "moving": moving, "velocity reversal": reversal,
            "near valve centre": centre, "high flow": high}
-    if prep.has_pressures:
-        rate = np.maximum(np.abs(prep.dpa), np.abs(prep.dpb))
-        out["fast pressure transient"] = rate > np.quantile(rate, 0.9)
+    if prep.has_pressures:     # NaN where a side was not recorded (several recordings)
+        rate = np.fmax(np.abs(prep.dpa), np.abs(prep.dpb))
+        seen = np.isfinite(rate)
+        out["fast pressure transient"] = seen & (
+            np.where(seen, rate, 0.0) > (np.quantile(rate[seen], 0.9) if seen.any() else 0.0))
     else:
         out["fast pressure transient"] = np.zeros(n, dtype=bool)
     out["accelerating"] = np.abs(prep.a) > np.quantile(np.abs(prep.a), 0.9)

@@ -41,7 +41,11 @@ class Nominal:
 
 def predictors(prep: Prepared) -> tuple[Predictor, Predictor | None]:
     """The refit objective (short-horizon predictions) and its closed-loop check
-    (re-anchored segments, closed loop only), re-anchored where a recording starts."""
+    (re-anchored segments, closed loop only), re-anchored where a recording starts;
+    recordings with different signals: each predicted as alone (:mod:`.joined`)."""
+    if prep.recorded:
+        from .joined import predictors as joined
+        return joined(prep)
     if prep.closed and not prep.pressures:
         return _at_starts(segments(prep, 1.0), prep), None   # horizons drift without p
     seg = _at_starts(segments(prep), prep) if prep.closed else None

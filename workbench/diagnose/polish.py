@@ -88,7 +88,11 @@ def polish(prep: Prepared, base: PlantParams, cand: Candidate, values: Mapping[s
     if not prep.pressures or cand.name in SKIP:
         return None
     t0 = time.perf_counter()
-    spans = _windows(prep, gain, WINDOW, WINDOWS)
+    full = np.ones(prep.n, dtype=bool)    # every recorded signal there (several recordings)
+    for s in prep.signals:
+        full &= prep.mask(s)
+    spans = [(a, b) for a, b in _windows(prep, np.where(full, gain, 0.0), WINDOW, WINDOWS)
+             if full[a:b].all()]
     if not spans:
         return None
     recs = []

@@ -69,18 +69,27 @@ class Predictor:
     @property
     def n_eff(self) -> float:
         """Effective number of independent observations (for the information criteria):
-        a few per window and signal, since the residuals within a window are correlated."""
-        return float(max(3 * self.windows * len(self.signals), 10))
+        a few per window and signal recorded there, since the residuals within a window
+        are correlated."""
+        pairs = sum(len(self.prep.signals_at(int(i))) for i in self.index[self.starts]) \
+            if self.prep.recorded else self.windows * len(self.signals)
+        return float(max(3 * pairs, 10))
 
     def measured(self, s: str) -> np.ndarray:
         return self.prep.measured(s)[self.index]
 
+    def _ok(self, s: str) -> np.ndarray:
+        """Simulated samples where signal ``s`` was recorded (all but where a joined
+        recording lacks it, :meth:`.data.Prepared.mask`)."""
+        return self.prep.mask(s)[self.index]
+
     def residuals(self, Y: np.ndarray) -> np.ndarray:
-        """Weighted residual vector (measurement - model) / noise, decimated."""
+        """Weighted residual vector (measurement - model) / noise, decimated; 0 where the
+        signal was not recorded."""
         out = []
         for s in self.signals:
             row = ("x", "p_a", "p_b").index(s)
-            r = (self.measured(s) - Y[row]) / self.sigma[s]
+            r = np.where(self._ok(s), (self.measured(s) - Y[row]) / self.sigma[s], 0.0)
             out.append(r[::self.decimate])
         r = np.concatenate(out)
         return np.where(np.isfinite(r), r, 1e6)
@@ -94,33 +103,35 @@ class Predictor:
             row = ("x", "p_a", "p_b").index(s)
             r = (self.measured(s) - Y[row])[::self.decimate]
             d = -dY[row][:, ::self.decimate].T / self.sigma[s]
-            out.append(np.where(np.isfinite(r)[:, None] & np.isfinite(d), d, 0.0))
+            ok = np.isfinite(r)[:, None] & np.isfinite(d) & self._ok(s)[::self.decimate, None]
+            out.append(np.where(ok, d, 0.0))
         return np.concatenate(out)
 
     def cost(self, Y: np.ndarray) -> float:
         """Mean squared weighted residual, summed over signals (1 per signal = noise level)."""
-        total = 0.0
-        for s in self.signals:
-            row = ("x", "p_a", "p_b").index(s)
-            r = (self.measured(s) - Y[row]) / self.sigma[s]
-            total += float(np.mean(r * r)) if np.all(np.isfinite(r)) else 1e12
-        return total
+        return float(sum(self.signal_costs(Y).values()))
 
     def signal_costs(self, Y: np.ndarray) -> dict[str, float]:
+        """Mean squared weighted residual of each signal over the samples where it was
+        recorded (1e12 when the model's output is not finite there)."""
         out = {}
         for s in self.signals:
             row = ("x", "p_a", "p_b").index(s)
-            r = (self.measured(s) - Y[row]) / self.sigma[s]
-            out[s] = float(np.mean(r * r)) if np.all(np.isfinite(r)) else 1e12
+            ok = self._ok(s)
+            r = (self.measured(s)[ok] - Y[row][ok]) / self.sigma[s]
+            out[s] = (0.0 if not len(r) else float(np.mean(r * r)) if np.all(np.isfinite(r))
+                      else 1e12)
         return out
 
     def fits(self, Y: np.ndarray) -> dict[str, float]:
-        """NRMSE fit (%) of each signal over the simulated samples."""
+        """NRMSE fit (%) of each signal over the simulated samples where it was recorded."""
         out = {}
         for s in self.signals:
             row = ("x", "p_a", "p_b").index(s)
-            y = Y[row]
-            out[s] = fit(self.measured(s), y) if np.all(np.isfinite(y)) else float("-inf")
+            ok = self._ok(s)
+            y = Y[row][ok]
+            out[s] = (float("nan") if len(y) < 3 else fit(self.measured(s)[ok], y)
+                      if np.all(np.isfinite(y)) else float("-inf"))
         return out
 
     def full(self, Y: np.ndarray, row: int) -> np.ndarray:
@@ -141,7 +152,7 @@ class Predictor:
         e = np.zeros(len(self.index))
         for s in self.signals:
             row = ("x", "p_a", "p_b").index(s)
-            e += ((self.measured(s) - Y[row]) / self.sigma[s]) ** 2
+            e += np.where(self._ok(s), ((self.measured(s) - Y[row]) / self.sigma[s]) ** 2, 0.0)
         return self._spread(e)
 
 
@@ -231,8 +242,8 @@ def horizons(prep: Prepared, horizon: float = HORIZON, coverage: float | None = 
     row = {k: i for i, k in enumerate(INPUT_ROWS)}
     pos = np.concatenate(([0], np.cumsum([len(q) for q in pieces])[:-1]))
     d[row["anchor"], pos] = 1.0
-    if prep.pressures:
-        d[row["anchor_p"], pos] = 1.0
+    if prep.pressures:        # where one is recorded (several recordings: not all have)
+        d[row["anchor_p"], pos] = prep.pressure_anchor()[index[pos]]
     d[row["anchor_hidden"], pos[gap]] = 1.0
     d[row["closed_loop"]] = 0.0
     return Predictor("horizons", prep, index, EngineInputs(d), pos, prep.signals, _sigma(prep),
@@ -296,8 +307,8 @@ def segments(prep: Prepared, length: float = SEGMENT, decimate: int = 2,
     row = {k: i for i, k in enumerate(INPUT_ROWS)}
     pos = (starts - starts[0]) // step
     d[row["anchor"], pos] = 1.0
-    if prep.pressures:
-        d[row["anchor_p"], pos] = 1.0
+    if prep.pressures:        # where one is recorded (several recordings: not all have)
+        d[row["anchor_p"], pos] = prep.pressure_anchor()[index[pos]]
     d[row["anchor_hidden"], pos] = 1.0
     d[row["closed_loop"]] = 1.0 if prep.closed else 0.0
     return Predictor("segments", prep, index, EngineInputs(d), pos, prep.signals, _sigma(prep),

@@ -82,6 +82,6 @@ def fits(prep: Prepared, sim: Mapping[str, np.ndarray]) -> dict[str, float]:
     out = {}
     for s in prep.signals:
         y = np.asarray(sim[s])
-        ok = np.isfinite(y)
+        ok = np.isfinite(y) & prep.mask(s)       # where recorded (several recordings)
         out[s] = fit(prep.measured(s)[ok], y[ok]) if ok.sum() > 2 else float("nan")
     return out

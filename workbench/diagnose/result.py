@@ -96,11 +96,22 @@ class Diagnosis:
     hunting: list[list[float]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        """The diagnosis result of formats.md section 4 (exactly those keys)."""
-        return {"plant": self.plant_file, "recording": self.recording_file,
-                "fit_before": {k: _round(v) for k, v in self.fit_before.items()},
-                "fit_after": {k: _round(v) for k, v in self.fit_after.items()},
-                "findings": [f.to_dict() for f in self.findings]}
+        """The diagnosis result of formats.md section 4 (exactly those keys), and for
+        several recordings diagnosed together ``recordings``: per recording its file,
+        and its fit before and after per signal it recorded (%, rounded as the others).
+        ``fit_before`` / ``fit_after`` are then over the joined recordings, each signal
+        where it was recorded."""
+        out = {"plant": self.plant_file, "recording": self.recording_file,
+               "fit_before": {k: _round(v) for k, v in self.fit_before.items()},
+               "fit_after": {k: _round(v) for k, v in self.fit_after.items()},
+               "findings": [f.to_dict() for f in self.findings]}
+        if len(self.recordings) > 1:
+            out["recordings"] = [
+                {"recording": r["recording"],
+                 "fit_before": {k: _round(v) for k, v in r["fit_before"].items()},
+                 "fit_after": {k: _round(v) for k, v in r["fit_after"].items()}}
+                for r in self.recordings]
+        return out
 
     def details(self) -> dict[str, Any]:
         """Everything else (ranking, regimes, notes, timings) for ``details.json``."""

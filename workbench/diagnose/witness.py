@@ -104,9 +104,11 @@ class Witness:
         if prep.pressures:
             # Slow channels only where the pressures change slowly: the long window
             # cannot follow a transient, so there it would compare smoothing errors.
-            rate = np.max([np.abs(prep.smooth_slow(prep.measured(s), 1))
-                           for s in prep.pressures], axis=0)
-            calm = rate < 3.0 * np.median(rate) + 3.0 * scale[f"{prep.pressures[0]}_slow"]
+            # (NaN where a side was not recorded: several recordings, never calm there.)
+            rate = np.fmax.reduce([np.where(prep.mask(s), np.abs(
+                prep.smooth_slow(prep.filled(s), 1)), np.nan) for s in prep.pressures])
+            level = np.median(rate[np.isfinite(rate)]) if np.isfinite(rate).any() else 0.0
+            calm = rate < 3.0 * level + 3.0 * scale[f"{prep.pressures[0]}_slow"]
             calm &= np.abs(prep.smooth_slow(prep.v)) < 10.0 * v_rest
             # dilate the transients by one long window
             k = prep.win_slow
@@ -115,7 +117,13 @@ class Witness:
         return cls(prep=prep, mask=mask, rest=rest, scale=scale, v_rest=v_rest, quiet=quiet)
 
     def _mask(self, ch: str) -> np.ndarray:
-        return self.quiet if ch.endswith("_slow") else self.mask
+        """Samples of channel ``ch``: where its pressure was recorded (the force
+        channel: where any was; several recordings), and quiet for the slow ones."""
+        m = self.quiet if ch.endswith("_slow") else self.mask
+        if not self.prep.recorded:
+            return m
+        side = ch[:3] if ch.startswith("p_") else None
+        return m & (self.prep.mask(side) if side else self.prep.pressure_anchor())
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -150,7 +158,7 @@ class Witness:
             i = ("p_a", "p_b").index(side) + 1
             rate = np.asarray(rates[i], dtype=float)
             res[side] = (prep.dpa if side == "p_a" else prep.dpb) - prep.smooth_p(rate)
-            res[f"{side}_slow"] = (prep.smooth_slow(prep.measured(side), 1)
+            res[f"{side}_slow"] = (prep.smooth_slow(prep.filled(side), 1)
                                    - prep.smooth_slow(rate))
         return res
 
@@ -176,6 +184,8 @@ class Witness:
         prep = self.prep
         prm = prep.plant.params
         out = {"force": prm["load.mass"] * res["v"]}
+        if prep.recorded:      # several recordings: no force witness without a pressure
+            out["force"] = np.where(prep.pressure_anchor(), out["force"], np.nan)
         if prep.pressures:
             k, T = prm["gas.polytropic_index"], prm["gas.temperature"]
             plant = prep.plant
