@@ -253,15 +253,6 @@ def test_perturbed_rig_ends_at_rest(perturbed):
     assert np.isfinite(ev.validation.metrics.sine_error_max)
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "not robust across the rig family: main 782e3fa fails at friction 1.2x/1.45x/1.5x/"
-    "1.55x/1.7x (mass +10 %; worst steady state 0.40/0.74/0.38/0.25/0.46 mm, holds "
-    "with 37-68 command changes) and 1.3x (0.35 mm, at rest), passes at 1.0x "
-    "(0.04 mm); with the graded, capped stretch (session 9, h14i) "
-    "1.2x/1.3x/1.45x/1.5x/1.7x end 0.12/0.06/0.21/0.20/0.08 mm with a hold still "
-    "pulsing in its second half (47/25/18/11/7 command changes), 1.0x and 1.55x pass: "
-    "a break-away jump of 1-3 quanta makes where a stop lands a lottery (module "
-    "docstring)"))
 def test_perturbed_rig_settles_without_limit_cycle(perturbed):
     ev = perturbed
     assert max(h["steady_state_error"] for h in _steps(ev)) <= ev.quantum

@@ -92,6 +92,8 @@ SOUND_SPEED = 343.0
 TRACK, LOCKED, READY, PULSE, SETTLE = "track", "locked", "ready", "pulse", "settle"
 #: Samples over which the unloading force loop removes the force (its time constant).
 UNLOAD_SAMPLES = 10
+#: Moves per direction whose median is the rig's typical jump (:meth:`HoldPositioner.no_better`).
+JUMPS = 3
 #: Smallest opening the force loop commands (fraction of the span): a smaller one
 #: stays inside the residual overlap a deadband inverse leaves (its linear piece).
 MIN_OPENING = 0.01
@@ -327,8 +329,11 @@ class HoldPositioner:
         precision rig with 1.5x friction no pulse moved the piston less than 2 quanta,
         and pulses at 1.5 quanta from the target hopped it back and forth over its bin
         through the whole hold (30 command changes in the hold's second half)."""
-        m = s.get("min+" if e > 0 else "min-")
-        return m is not None and abs(e) <= 0.5 * m * self.quantum * (1 + 1e-9)
+        jumps = s.get("jumps+" if e > 0 else "jumps-")
+        if not jumps:
+            return False
+        m = sorted(jumps)[len(jumps) // 2]
+        return abs(e) <= 0.5 * m * self.quantum * (1 + 1e-9)
 
     def _adapt(self, s: dict, x_m: float, e: float) -> None:
         """Strength of the next pulse from the move this one made (quanta towards r).
@@ -347,9 +352,12 @@ class HoldPositioner:
         lo, hi = s.get(key, 0.0), s.get("hi" + key[2], math.inf)
         moved = (x_m - s["x0"]) * s["dir"] / self.quantum
         a = s["a"]
-        if moved >= 0.5 and a <= lo * math.sqrt(self.grow):   # a jump at the threshold
-            s["min" + key[2]] = min(s.get("min" + key[2], math.inf), round(moved))
+        if moved >= 0.5:
+            s["mv" + key[2]] = min(s.get("mv" + key[2], math.inf), a)
+            if a <= s.get("stay" + key[2], 0.0) * self.grow * (1 + 1e-9):   # at the threshold
+                s["jumps" + key[2]] = (*s.get("jumps" + key[2], ())[1 - JUMPS:], round(moved))
         if moved < 0.5:
+            s["stay" + key[2]] = max(s.get("stay" + key[2], 0.0), a)
             lo = max(lo, a)
         elif e * s["dir"] < -0.5 * self.quantum:          # past the target's bin
             hi = min(hi, a)
@@ -384,7 +392,11 @@ class HoldPositioner:
             return min(float(self.max_width) / self.width, up)
         if math.isfinite(hi):
             return hi * self.shrink
-        return s["a"]
+        other = "-" if sign == "+" else "+"
+        held, moved = s.get("stay" + other, 0.0), s.get("mv" + other, math.inf)
+        if held > 0 and math.isfinite(moved) and held < moved:
+            return math.sqrt(held * moved)     # the other way's threshold (friction is even)
+        return self.amplitude
 
     def to_dict(self) -> dict:
         return {"quantum": self.quantum, "sample_time": self.sample_time, "width": self.width,
@@ -402,7 +414,7 @@ class HoldPositioner:
 
 
 def hold_for_plant(plant, sample_time: float, quantum: float, pressure_noise: float = 0.0,
-                   **kw) -> HoldPositioner:
+                   line_flow: float | None = None, **kw) -> HoldPositioner:
     """:class:`HoldPositioner` for a plant file (module docstring for the choices).
 
     * width: the lines' acoustic delay L / c (``lines.length``, c = 343 m/s) in samples,
@@ -426,7 +438,10 @@ def hold_for_plant(plant, sample_time: float, quantum: float, pressure_noise: fl
     rate = 2.0 * A * float(prm["gas.polytropic_index"]) * 287.0 * temp * flow / v_mid
     fc = float(prm.get("friction.coulomb") or 0.02 * p_s * A)
     fs = float(prm.get("friction.static") or fc)
-    amp = min(1.0, max(1e-3, fs / (rate * width * T)))
+    # the bump's rise is limited by what the lines pass (0.45 and 0.67 opening gave the
+    # same 31 N bump on the precision rig): the first pulse sized on that flow
+    lim = rate if not line_flow else rate * min(1.0, float(line_flow) / flow)
+    amp = min(1.0, max(1e-3, fs / (lim * width * T)))
     noise = math.hypot(A, float(plant.area_b)) * float(pressure_noise)
     kw.setdefault("width", width)
     kw.setdefault("amplitude", amp)
