@@ -25,7 +25,8 @@ DESCRIPTION = (
     "piston beyond the stroke) or fits worse than a constant, with no candidate to "
     "explain it, is an error with its cause (exit 2), never 'no finding'. Several "
     "recordings of the same rig are diagnosed together (one set of findings, the fit per "
-    "recording); a recording with one chamber pressure uses it (the other is estimated "
+    "recording), also when they measure different signals (e.g. one with x, p_a, p_b and "
+    "one with x only: each signal counts where it was recorded); a recording with one chamber pressure uses it (the other is estimated "
     "from the force balance); a recorded supply pressure p_s that sags under flow is "
     "used sample by sample.")
 

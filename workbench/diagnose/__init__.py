@@ -17,6 +17,8 @@ The method is split into parts (one concept per module):
   stick-slip hunting stretches (what a free-running replay cannot reproduce);
 * :mod:`.replays` -- the recording replayed on a plant (fit before and after);
 * :mod:`.nominal` -- the nominal plant against the recording (objective, regimes);
+* :mod:`.joined` -- the objective of recordings with different signals joined (each
+  predicted as alone, each signal compared where recorded);
 * :mod:`.result` -- :class:`Finding`, :class:`Diagnosis` (JSON, summary, result set);
 * :mod:`.blas` -- one BLAS thread while a diagnosis runs (its workers are processes);
 * :mod:`.core` -- :func:`diagnose`: replay, locate, explain, augment, refit;

@@ -24,6 +24,7 @@ from ..replay import CONTROLLER_AGREEMENT  # % below which the replay is open lo
 from ..replay import controller_agreement as _controller_agreement
 from ..replay import controller_phase as _controller_phase
 from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
+from .recorded import mixed_note, with_all_signals
 
 __all__ = ["Prepared", "prepare", "prepare_many", "other_side", "uniform", "logger_period",
            "recorded_supply", "MIN_DURATION",
@@ -529,7 +530,7 @@ def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Pre
 
     Recordings with different measured signals (one with x, p_a, p_b, one with x only,
     one with p_a only) are joined on the signals they share and each other signal is
-    kept where it was recorded (:func:`_with_all_signals`): it counts only there.
+    kept where it was recorded (:func:`.recorded.with_all_signals`): it counts only there.
 
     Raises
     ------
@@ -562,7 +563,7 @@ def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Pre
     prep = prepare(plant, joined, mode, starts)
     mixed = len({p.signals for p in parts}) > 1
     if mixed:
-        prep = _with_all_signals(prep, parts, starts)
+        prep = with_all_signals(prep, parts, starts)
     prep.parts = parts
     notes = [f"{len(parts)} recordings diagnosed together (one model for all; fit per "
              "recording in details.json): " + ", ".join(
@@ -571,7 +572,7 @@ def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Pre
         notes.append("not every recording can be replayed in closed loop: all are replayed "
                      "open loop on u, re-anchored")
     if mixed:
-        notes.append(_mixed_note(parts))
+        notes.append(mixed_note(parts))
     for p in parts:       # (a part's "short recording" is not the joined one's)
         notes += [(f"{p.rec.source}: {n}" if mixed and n.startswith("the recording has")
                    else n) for n in p.notes
@@ -580,61 +581,3 @@ def prepare_many(plant: Plant, recs: list[Recording], mode: str = "auto") -> Pre
     prep.notes = notes + [n for n in prep.notes if n not in notes
                           and not (mixed and n.startswith("the recording has"))]
     return prep
-
-
-def _mixed_note(parts: list[Prepared]) -> str:
-    """What a set of recordings with different signals gives the diagnosis, in words."""
-    which = "; ".join(f"{p.rec.source}: {', '.join(p.signals)}" for p in parts)
-    return ("the recordings measure different signals (" + which + "): each signal is "
-            "compared only where it was recorded, so the pressures of one recording and "
-            "the position of another inform the one model; the noise of each signal is "
-            "that of the recordings that have it; where no chamber pressure is recorded "
-            "the predictions run on the model's pressures, as for a position-only "
-            "recording, and the flow and force witnesses are left out")
-
-
-def _with_all_signals(prep: Prepared, parts: list[Prepared], starts: list[int]) -> Prepared:
-    """The joined ``prep`` (prepared on the signals every part shares) given every
-    signal some part recorded, each where it was recorded (``Prepared.recorded``).
-
-    Per chamber pressure: the measurement where recorded, NaN elsewhere; its rate
-    likewise; the smoothed value (the predictions' anchors and the observer's input)
-    the part's own (its force-balance estimate where the part has the other side
-    only, :func:`other_side`) or, in a part with no pressure, the plant's equilibrium
-    at the part's first position (what a position-only recording alone starts from,
-    :meth:`workbench.plant.Plant.initial_state`; the predictions re-anchor on it only
-    at the part's start). The noise of a signal is the median over the parts that
-    have it (each part's own, :func:`prepare`).
-    """
-    from dataclasses import replace
-    n = prep.n
-    cuts = list(starts) + [n]
-    spans = list(zip(cuts[:-1], cuts[1:]))
-    union = tuple(s for s in ("x", "p_a", "p_b") if any(s in p.signals for p in parts))
-    fields: dict[str, Any] = {"signals": union, "noise": dict(prep.noise), "recorded": {}}
-    plant = prep.plant
-    ia, ib = plant.state_index("p_a"), plant.state_index("p_b")
-    for side in union[1:]:
-        short = side[-1]
-        meas, sm, rate = np.full(n, np.nan), np.empty(n), np.full(n, np.nan)
-        mask = np.zeros(n, dtype=bool)
-        for p, (a, b) in zip(parts, spans):
-            if side in p.signals:
-                meas[a:b], rate[a:b] = p.measured(side), getattr(p, f"dp{short}")
-                mask[a:b] = True
-            if p.pressures:
-                sm[a:b] = p.smoothed(side)
-            else:
-                z = plant.initial_state(float(np.clip(p.xs[0], 0.0, plant.stroke)))
-                sm[a:b] = z[ia] if side == "p_a" else z[ib]
-        fields[side], fields[f"p{short}s"], fields[f"dp{short}"] = meas, sm, rate
-        fields["recorded"][side] = mask
-        fields["noise"][side] = float(np.median([p.noise[side] for p in parts
-                                                 if side in p.signals]))
-    for side in ("p_a", "p_b"):       # a side no part recorded: its estimate, if any
-        if side not in union and any(p.pressures for p in parts):
-            fields[f"p{side[-1]}s"] = np.concatenate(
-                [p.smoothed(side) if p.pressures else
-                 np.full(b - a, plant.initial_state(float(np.clip(p.xs[0], 0.0, plant.stroke)))
-                         [ia if side == "p_a" else ib]) for p, (a, b) in zip(parts, spans)])
-    return replace(prep, **fields)

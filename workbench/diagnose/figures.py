@@ -72,8 +72,9 @@ def signature_figure(t, witness, witness_after, err_nominal, err_after, located,
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
     w = max(int(round(0.02 / dt)), 1)          # 20 ms moving average for display
 
-    def sm(y):
-        return np.convolve(np.nan_to_num(y), np.ones(w) / w, mode="same")
+    def sm(y):          # NaN (not formed there: several recordings) stays a gap
+        return np.where(np.isfinite(y), np.convolve(np.nan_to_num(y), np.ones(w) / w,
+                                                    mode="same"), np.nan)
 
     for ax, p in zip(axes, panels):
         lab, k = labels[p]

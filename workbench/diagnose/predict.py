@@ -242,8 +242,8 @@ def horizons(prep: Prepared, horizon: float = HORIZON, coverage: float | None = 
     row = {k: i for i, k in enumerate(INPUT_ROWS)}
     pos = np.concatenate(([0], np.cumsum([len(q) for q in pieces])[:-1]))
     d[row["anchor"], pos] = 1.0
-    if prep.pressures:        # where one is recorded (several recordings: not all have)
-        d[row["anchor_p"], pos] = prep.pressure_anchor()[index[pos]]
+    if prep.pressures:
+        d[row["anchor_p"], pos] = 1.0
     d[row["anchor_hidden"], pos[gap]] = 1.0
     d[row["closed_loop"]] = 0.0
     return Predictor("horizons", prep, index, EngineInputs(d), pos, prep.signals, _sigma(prep),
@@ -307,8 +307,8 @@ def segments(prep: Prepared, length: float = SEGMENT, decimate: int = 2,
     row = {k: i for i, k in enumerate(INPUT_ROWS)}
     pos = (starts - starts[0]) // step
     d[row["anchor"], pos] = 1.0
-    if prep.pressures:        # where one is recorded (several recordings: not all have)
-        d[row["anchor_p"], pos] = prep.pressure_anchor()[index[pos]]
+    if prep.pressures:
+        d[row["anchor_p"], pos] = 1.0
     d[row["anchor_hidden"], pos] = 1.0
     d[row["closed_loop"]] = 1.0 if prep.closed else 0.0
     return Predictor("segments", prep, index, EngineInputs(d), pos, prep.signals, _sigma(prep),

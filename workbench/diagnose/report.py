@@ -58,7 +58,8 @@ def _summary_section(d) -> rp.Section:
     kv = [("plant file", d.plant_file), ("recording", d.recording_file),
           ("samples", int(prep.n)), ("duration", float(prep.rec.duration), "s"),
           ("sample time", float(prep.dt) * 1e3, "ms"), ("replay", d.mode),
-          ("signals compared", ", ".join(prep.signals)),
+          ("signals compared", ", ".join(prep.signals)
+           + (" (each where recorded: see the fit per recording)" if prep.recorded else "")),
           ("position noise", prep.noise["x"] * 1e6, "um")]
     for side in prep.pressures:
         kv.append((f"pressure noise {side}", prep.noise[side], "Pa"))
@@ -72,12 +73,14 @@ def _summary_section(d) -> rp.Section:
                                    "replay, per signal, before and after each finding"))
     if len(d.recordings) > 1:
         sig = list(d.fit_before)
+
+        def per(fits):
+            return [fits.get(s, "not recorded") for s in sig]
         blocks.append(rp.Table(
             ["recording", "from", "duration"] + [f"{s} before" for s in sig]
             + [f"{s} after" for s in sig],
             [[Path(r["recording"]).name, r["start_s"], r["duration_s"]]
-             + [r["fit_before"].get(s) for s in sig] + [r["fit_after"].get(s) for s in sig]
-             for r in d.recordings],
+             + per(r["fit_before"]) + per(r["fit_after"]) for r in d.recordings],
             units=["", "s", "s"] + ["%"] * (2 * len(sig)),
             caption="Several recordings diagnosed together (one model for all): the fit of "
                     "each, before and after the findings ('from': where it starts on the "
