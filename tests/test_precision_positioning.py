@@ -106,6 +106,32 @@ a limit cycle), 782e3fa -> now:
   seeds 0-4 (nominal rig): unchanged to the digit.
 (With the tolerance taken out, seeds 0-4 pass every test here: coordinator, above.)
 
+Session 10 (branch h14k): the hold's pulses for every law. PID and FL land 1.7-2.5 mm
+from their targets after the 60 mm steps (the law's own landing), and the hold walked the
+piston in at about 80 ms per pulse: the first pulses were sized on the valve's flow (11-14
+N bumps against F_s = 25 N: 3-4 pulses before one moved; now on the flow the 1 m lines
+pass), a walk grown x 1.5 per pulse jumped from 0.3 to 1.1 mm moves and overshot, a
+direction's first pulse took the other direction's last strength, and the stop rule took
+the smallest jump ever seen (one lucky 1-quantum move kept a piston a quantum off hopping
+over its bin) or, counted at the bracket's lower end, a walk's 9-quanta jump (stopped 0.43
+mm off). Now: the strength is interpolated on the rig's own (strength, move) outcomes
+(hold.HoldPositioner._aim), the stop rule takes the median of the three smallest moves,
+a new direction starts at the other's threshold. Test profile, worst steady state after
+the steps / holds with a limit cycle, seeds 0-4 (/tmp/h14k/ev.py, loaded machine):
+
+  PID  5b942e9: 0.406/0.372/0.271/0.354/0.442 mm, 1/1/0/0/0 holds
+       now:     0.096/0.084/0.161/0.179/0.124 mm, 0/0/1/0/0
+  FL   5b942e9: 0.147/0.404/0.463/0.141/0.628 mm, 2/1/1/1/1
+       now:     0.027/0.133/0.078/0.244/0.114 mm, 0/0/0/1/0
+  NMPC now:     0.067/0.075/0.086/0.080/0.112 mm, none; sine 0.47-0.89 mm
+  NMPC perturbed (mass +10 %), friction 1.2/1.3/1.45/1.5/1.7x: at rest but for one
+       hold at 1.7x (steady 0.092/0.190/0.163/0.111/0.048 mm); 5b942e9 at 1.5x: 0.103
+       mm, a hold with 19 command changes.
+
+What is left for PID and FL: the law's landing (1.7-2.5 mm off, up to 0.6 s after a 125
+or 250 mm step on the precision profile --quick, whose 1.5 s holds leave a walk no time:
+PID 2 of 9 holds, FL 1), and the lottery of a break-away jump of 1-2 quanta near the bin.
+
 Tried and not kept: cutting a pulse short when the piston is seen moving (never
 fired: the piston breaks away at the end of the forward half or later, the line's
 delay carries the bump 3 ms beyond the reversal); the graded stretch without the
@@ -254,6 +280,27 @@ def test_perturbed_rig_ends_at_rest(perturbed):
 
 
 def test_perturbed_rig_settles_without_limit_cycle(perturbed):
+    # an xfail(strict=False) until session 10: holds pulsed into their second half at
+    # 1.2-1.7x friction (module docstring)
     ev = perturbed
     assert max(h["steady_state_error"] for h in _steps(ev)) <= ev.quantum
     assert ev.limit_cycle_free
+
+
+@pytest.fixture(scope="module", params=["pid", "fl"])
+def other_law(request, plant):
+    return evaluate_design(plant, request.param, reference=profile())
+
+
+def test_pid_and_fl_hold_without_limit_cycle(other_law):
+    # issue 14 item 1: the precision hold serves every position law. PID and FL land
+    # 1.7-2.5 mm off after the 60 mm steps (stuck short, or past), and the hold walks
+    # the piston in with pulses; a hold still pulsing in its second half is what the
+    # report's "limit_cycle_free" judges (seed 0 before session 10: PID 1 hold, FL 2)
+    ev = other_law
+    assert len(ev.holds) == 5
+    assert ev.limit_cycle_free, [(h["segment"], h["peak_to_peak"], h["command_changes"])
+                                 for h in ev.holds]
+    # and they end near the target: within two quanta after every step (before
+    # session 10: PID 0.406 mm, FL 0.147 mm)
+    assert max(h["steady_state_error"] for h in _steps(ev)) <= 2 * ev.quantum
