@@ -143,6 +143,7 @@ def _design(args, out: Path, done: list) -> int:
                       "precision spec"], rows,
                      units=["", "mm", "mm", "%", "mm", "ms", "V", "", ""],
                      caption="Precision figures on the full plant (12-bit x, noisy p, no v)"),
+            rp.Paragraph(_verdict_text(evs, pert)),
         ]))
         best = min(KINDS, key=lambda k: (figs[k]["sine_worst"], figs[k]["steady_state_worst"]))
         summary = {"figures": figs, "best": best, "published": PUBLISHED,
@@ -161,6 +162,26 @@ def _design(args, out: Path, done: list) -> int:
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=rp.json_default))
     print(f"best: {best}; report: {out / 'report.html'}")
     return 0
+
+
+def _verdict_text(evs: dict, pert) -> str:
+    """Which controller passes the precision specification, and what each failing
+    one misses (the failed checks' names, and holds with a limit cycle)."""
+    runs = dict(evs)
+    runs["NMPC on the rig with friction 1.5x, mass +10 %"] = pert
+    passed, failed = [], []
+    for name, ev in runs.items():
+        label = name.upper() if name in KINDS else name
+        if ev.validation.passed:
+            passed.append(label + ("" if ev.limit_cycle_free else
+                                   " (its checks; a hold has a limit cycle)"))
+        else:
+            missed = [c.name for c in ev.validation.checks if not c.passed]
+            if not ev.limit_cycle_free:
+                missed.append("a hold with a limit cycle")
+            failed.append(f"{label} ({', '.join(missed) or 'see its table'})")
+    return ("Passes the precision specification: " + (", ".join(passed) or "none")
+            + ". " + ("Fails: " + "; ".join(failed) + "." if failed else "Every run passes."))
 
 
 def _cell(x: float, decimals: int) -> str:
