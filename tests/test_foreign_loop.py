@@ -70,3 +70,35 @@ def test_holds_on_the_foreign_lugre_rig_are_within_one_quantum_and_at_rest(run):
         # most the two command changes of the valve closing once
         assert h["peak_to_peak"] <= q and h["command_changes"] <= 2, holds
     assert math.isclose(holds[0]["target"], C + 0.06)
+
+
+@pytest.fixture(scope="module")
+def fl_smooth_lumped():
+    """The designed FL on the foreign rig with smooth Stribeck friction and one lumped
+    line section, sensor seeds 0 and 1: the hold evidence of each run."""
+    plant = Plant.from_toml(PLANT)
+    p = references.profile([(0, C), (0.3, C), (0.3, C + 0.06), (1.8, C + 0.06), (1.8, C),
+                            (3.3, C)])
+    ref = references.Reference(p.times, p.values)
+    q = plant.stroke / 4096
+    rig = fl.rig_for(PLANT, law="smooth", line_model="lumped")
+    out = []
+    for seed in (0, 1):
+        ctrl = design(plant, "fl", reference=ref, quantum=q, pressure_noise=300.0)
+        out.append(fl.holds(fl.run(ctrl, rig, ref, 3.3, seed=seed), q, lead=ctrl.inner.lead))
+    return out, q
+
+
+def test_fl_lands_near_its_targets_on_the_smooth_friction_lumped_line_rig(fl_smooth_lumped):
+    # session 9 (h14h): PID and FL hunted on this rig, 0.6-1.5 mm off with 33-80
+    # command changes per hold. The FL at 25 rad/s arrived short (a stuck piston
+    # the position terms moved at k0 e = 15.6e3 e m/s^3) and the holds pulsed from
+    # there: steady state (mm) seed 0 1.52 / 0.99, seed 1 0.64 / 2.07, mean 1.31.
+    # At the bandwidth the lines' delay allows (40 rad/s, design._fl_bandwidth):
+    # seed 0 0.004 / 0.031, seed 1 0.15 / 0.52 (seed 1 stops 0.8 mm short and the
+    # hold pulses it in: 34 / 42 command changes, not yet at rest: the hold's).
+    # Required: the mean over the four holds below 0.5 mm (now 0.18)
+    runs, q = fl_smooth_lumped
+    errors = [h["steady_state_error"] for holds in runs for h in holds]
+    assert len(errors) == 4
+    assert np.mean(errors) < 0.5e-3, errors

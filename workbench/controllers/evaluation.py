@@ -193,12 +193,17 @@ class DesignEvaluation:
         hold_rows = [[h["segment"], f"{h['steady_state_error'] * 1e3:.3f}",
                       f"{h['peak_to_peak'] * 1e3:.3f}", h["command_changes"]]
                      for h in self.holds]
+        fig = rp.Figure(plots.validation_figure(v, title=f"{name} on the full plant"),
+                        "Reference and position, command, chamber pressures", width=0.9)
         return [
             rp.Section(f"{name}: controller", [rp.KeyValues(kv)]),
-            # both tables before the figure: a figure is never split, and after the
-            # controller's table and one table the rest of a page was too short for it
-            # (the report's page 6 half empty)
+            # the figure first, the tables after it: a figure is never split, and
+            # the flow lets the text blocks after a figure that does not fit the
+            # page's rest go first (report.pdf_flow.float_figures). With the
+            # figure last no table was left to fill that rest: the precision
+            # report's page 4 was 40 % empty before the FL figure (session 9)
             rp.Section(f"{name}: precision validation", [
+                fig,
                 rp.Table(["check", "limit", "unit", "value", "pass"], rows,
                          caption=f"{name} on the full plant, precision specification"),
                 rp.Table(["hold", "steady-state error", "peak-to-peak, 2nd half",
@@ -208,8 +213,6 @@ class DesignEvaluation:
                                  f"as a peak-to-peak above one quantum "
                                  f"({self.quantum * 1e3:.3f} mm) with continuing command "
                                  "activity"),
-                rp.Figure(plots.validation_figure(v, title=f"{name} on the full plant"),
-                          "Reference and position, command, chamber pressures", width=0.9),
             ]),
         ]
 
