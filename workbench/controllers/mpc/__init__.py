@@ -51,9 +51,13 @@ but is only close to optimal (on the tests, 1e-3 V from IPOPT's commands);
 ``"exact"`` converges to the NLP's optimum.
 
 The controller reads the full state (x, v, p_a, p_b) from the measurements the
-simulator passes; its prediction model must therefore be a 4-state plant
+simulator passes; its prediction model is therefore a 4-state plant
 (:meth:`NMPC.for_plant` reduces any plant file to one: lines, spool dynamics, heat
-transfer and supply droop are left to the feedback). Dry friction is predicted in
+transfer and supply droop are left to the feedback), or with ``lines="lumped"`` that
+and one segment per line (node pressure and flow into the chamber, the plant's own
+line law), whose states the NMPC estimates from the measured chamber pressures and
+the commands it sent (:mod:`.lines`): the lag from command to chamber is then in the
+prediction (what :func:`workbench.controllers.design` uses on a lined plant). Dry friction is predicted in
 its smooth form, F_str(v) tanh(v / v_e), with v_e half the Stribeck velocity and
 as many RK4 substeps as that needs for one step to resolve the decay at rest
 (:func:`.model.friction_velocity`): with too few, RK4 is unstable there, and the
@@ -90,6 +94,8 @@ Layout
 :mod:`.model`
     The prediction model (:func:`prediction_model`), the scaled RK4 interval map and
     its Jacobians, the reference over the horizon (:func:`horizon_reference`).
+:mod:`.lines`
+    The estimate of the lumped lines' states (a Kalman filter on the NMPC's model).
 :mod:`.limits`
     The soft-limit rows between the shooting nodes (``interior_limits``).
 :mod:`.problem`

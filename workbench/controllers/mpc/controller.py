@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 
 from ...errors import InputError
-from .model import NMPC_STATES, prediction_model
+from .model import LINE_STATES, NMPC_STATES, prediction_model
 from .problem import Problem
 from .results import NMPCState, Solution
 from .update import advance, solution
@@ -119,6 +119,9 @@ class NMPC:
         integrates it accurately (:func:`.model.friction_velocity`; 5.25 mm/s and 8
         substeps on the 2 ms precision rig: the physics' 1 mm/s with 4 substeps made
         the prediction of a stuck piston a rounding artefact).
+    pressure_noise : float, Pa
+        Std of the pressure sensors' noise, for the estimate of a lumped line's states
+        (:mod:`.lines`; a model without lines does not use it).
     compiled_sample : bool
         With ``jit``, modes rti and sqp and DAQP: run each update as one
         compiled C call (:mod:`.fast`; same plans). :attr:`compiled_reason` says why
@@ -152,6 +155,7 @@ class NMPC:
     compiled_sample: bool = field(default=True, metadata=_meta("", "one C call per sample"))
     friction_width: float | None = field(default=None,
                                          metadata=_meta("m/s", "tanh width of dry friction"))
+    pressure_noise: float = field(default=300.0, metadata=_meta("Pa", "pressure sensor noise"))
 
     #: Measurements read (wrap in :class:`~workbench.controllers.observer.Observed` to
     #: run on x, p_a, p_b only).
@@ -169,15 +173,17 @@ class NMPC:
         object.__setattr__(self, "_problem", Problem(self))
 
     @classmethod
-    def for_plant(cls, plant, effects: Sequence[str] | None = None, **settings) -> "NMPC":
-        """NMPC whose prediction model is ``plant`` reduced by :func:`prediction_model`.
+    def for_plant(cls, plant, effects: Sequence[str] | None = None, lines: str = "volume",
+                  **settings) -> "NMPC":
+        """NMPC whose prediction model is ``plant`` reduced by :func:`prediction_model`
+        (``lines``: how the plant's lines enter it, "volume" or "lumped").
 
         ``sample_time`` defaults to the plant file's ``controller.sample_time`` when it
         has one.
         """
         if "sample_time" not in settings and plant.params.get("controller.sample_time"):
             settings["sample_time"] = float(plant.params["controller.sample_time"])
-        return cls(prediction_model(plant, effects), **settings)
+        return cls(prediction_model(plant, effects, lines=lines), **settings)
 
     def with_settings(self, **changes) -> "NMPC":
         """A copy with some settings changed (the model is kept)."""
@@ -227,11 +233,12 @@ def _check_model(c: NMPC) -> None:
     names = getattr(model, "state_names", None)
     if names is None:
         raise InputError(f"model must be a workbench.Plant, got {type(model).__name__}")
-    if tuple(names) != NMPC_STATES:
+    if tuple(names) not in (NMPC_STATES, NMPC_STATES + LINE_STATES):
         raise InputError(
-            f"the NMPC predicts the states {', '.join(NMPC_STATES)} it measures; this "
-            f"model has {', '.join(names)}. Build the prediction model with "
-            "mpc.prediction_model(plant) or NMPC.for_plant(plant, ...)")
+            f"the NMPC predicts the states {', '.join(NMPC_STATES)} it measures (and "
+            f"lumped lines' {', '.join(LINE_STATES)}); this model has {', '.join(names)}. "
+            "Build the prediction model with mpc.prediction_model(plant) or "
+            "NMPC.for_plant(plant, ...)")
     if getattr(model, "friction", "smooth") != "smooth" and model.params.has_effect("dry_friction"):
         object.__setattr__(c, "model", model.with_friction("smooth"))
 
@@ -251,6 +258,9 @@ def _check_limits(c: NMPC) -> None:
 
 def _check_numbers(c: NMPC) -> None:
     """Positive tolerances and times, gains in range, integer counts."""
+    pn = c.pressure_noise
+    if isinstance(pn, bool) or not isinstance(pn, (int, float)) or not (math.isfinite(pn) and pn >= 0):
+        raise InputError(f"NMPC pressure_noise must be a finite number >= 0 Pa, got {pn!r}")
     for name in ("sample_time", "position_tolerance", "velocity_tolerance",
                  "command_rate_tolerance", "reference_rate_limit", "tolerance"):
         v = getattr(c, name)

@@ -47,7 +47,7 @@ from ...integrate.jit import (MINMAX, CompileError, cache_dir, have_compiler,
                               inline_minmax, shared_library, source_digest)
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
-from .fast_c import CONFIG, DRIVER
+from .fast_c import DRIVER, config
 from .qp import apply_step, daqp_primal_tol, intervals
 from .results import StepInfo
 
@@ -104,9 +104,11 @@ def _source(pb) -> str:
         gen.generate(tmp + os.sep)
         generated = Path(tmp, "wb_fast.c").read_text()
     generated = _inline_minmax(generated)
-    cfg = "\n".join(f"#define C_{k} {i}" for i, k in enumerate(CONFIG))
+    names = config(pb.nx)
+    cfg = "\n".join(f"#define C_{k} {i}" for i, k in enumerate(names))
     return generated + DRIVER % {
-        "N": pb.N, "NP": pb.P.size, "CFG": cfg, "NCFG": len(CONFIG), "NZ": nz, "NC": nc,
+        "N": pb.N, "NX": pb.nx, "NP": pb.P.size, "CFG": cfg, "NCFG": len(names), "NZ": nz,
+        "NC": nc,
         "NRN": 2 * pb.N * len(pb.soft), "MINT": pb.m_int,
         "KI0": pb.first_interior, "PRIMAL_TOL": daqp_primal_tol(pb) or 0.0, "QP_TOL": QP_TOL,
         "QP_ROUNDS": QP_ROUNDS, "QP_WARM": int(QP_WARM), **_settings_layout(pb),
@@ -156,37 +158,42 @@ def _check_layout(pb, lin, post) -> None:
 class CompiledMemory:
     """The memory of :class:`CompiledNMPC` between samples: one float buffer.
 
-    Attributes (views, SI where stated): ``X`` (4, N + 1) and ``U`` (N,) the plan,
+    Attributes (views, SI where stated): ``X`` (nx, N + 1) and ``U`` (N,) the plan,
     scaled as in :class:`~.results.NMPCState`; ``u_prev`` scaled command applied;
-    ``r_prev`` m; ``z`` (4,) scaled measured state; ``d`` N force estimate; ``t`` s;
+    ``r_prev`` m; ``z`` (nx,) scaled measured state (and lumped lines' estimate); ``d`` N force estimate; ``t`` s;
     :attr:`info` the last update's :class:`~.results.StepInfo`; ``working_set``
     (N + ns bounds, then the QP's rows: +1 upper, -1 lower, 0 inactive) the last QP's
     active constraints, the warm start of the next.
     """
 
-    def __init__(self, N: int, size: int) -> None:
+    def __init__(self, N: int, size: int, nx: int = 4) -> None:
         self.buf = np.zeros(size)
         self.ptr = self.buf.ctypes.data
-        self.N = N
-        n = 4 * (N + 1) + N
-        self._off = {"u_prev": n, "r_prev": n + 1, "z": n + 2, "d": n + 6, "t": n + 7,
-                     "it": n + 9, "qps": n + 9 + 13, "ws": n + 9 + 16}
+        self.N, self.nx = N, nx
+        n = nx * (N + 1) + N
+        it = n + 5 + nx
+        self._off = {"u_prev": n, "r_prev": n + 1, "z": n + 2, "d": n + 2 + nx,
+                     "t": n + 3 + nx, "it": it, "qps": it + 9 + nx, "ws": it + 12 + nx}
+        #: covariance of the lumped lines' estimate (:mod:`.lines`), None before the
+        #: first sample or without lines
+        self.line_cov: np.ndarray | None = None
 
     def _at(self, name: str) -> int:
         return self._off[name]
 
     @property
     def X(self) -> np.ndarray:
-        return self.buf[:4 * (self.N + 1)].reshape(self.N + 1, 4).T
+        nx = self.nx
+        return self.buf[:nx * (self.N + 1)].reshape(self.N + 1, nx).T
 
     @property
     def U(self) -> np.ndarray:
-        n = 4 * (self.N + 1)
+        n = self.nx * (self.N + 1)
         return self.buf[n:n + self.N]
 
     u_prev = property(lambda self: float(self.buf[self._at("u_prev")]))
     r_prev = property(lambda self: float(self.buf[self._at("r_prev")]))
-    z = property(lambda self: self.buf[self._at("z"):self._at("z") + 4])
+    z = property(lambda self: self.buf[self._at("z"):self._at("z") + self.nx])
     d = property(lambda self: float(self.buf[self._at("d")]))
     t = property(lambda self: float(self.buf[self._at("t")]))
 
@@ -194,7 +201,7 @@ class CompiledMemory:
         """s (wall) of the last sample: the linearisation (shift, estimate, interval
         maps), the condensing, the QP (DAQP), post (plan update), each summed over the
         sample's Gauss-Newton steps, and the whole sample in C."""
-        i = self._at("it") + 8
+        i = self._at("it") + 4 + self.nx
         t = self.buf[i:i + 4]
         return float(t[0]), float(t[1]), float(t[2]), float(t[3]), float(self.buf[i - 1])
 
@@ -214,8 +221,9 @@ class CompiledMemory:
         i = self._off["it"]
         it, ok, restarted = self.buf[i:i + 3]
         v = self.buf[i + 3:i + 7].tolist()
+        ts = float(self.buf[i + 3 + self.nx])
         return StepInfo(iterations=int(it), success=bool(ok),
-                        solve_time=float(self.buf[i + 7]) if solve_time is None else solve_time,
+                        solve_time=ts if solve_time is None else solve_time,
                         restarted=bool(restarted), slack_stroke=max(v[0], 0.0) * pb.L,
                         slack_pressure=max(v[2], v[3]) * pb.p_sup,
                         slack_speed=v[1] * V_SCALE if pb.c.max_speed is not None else 0.0)
@@ -272,12 +280,12 @@ class CompiledNMPC:
         so.wb_fast_sample_ref.restype = ctypes.c_int
         self._msize = int(so.wb_fast_memory_size())
         c = nmpc
-        vals = {"sx0": pb.sx[0], "sx1": pb.sx[1], "sx2": pb.sx[2], "sx3": pb.sx[3], "L": pb.L,
+        vals = {**{f"sx{i}": pb.sx[i] for i in range(pb.nx)}, "L": pb.L,
                 "T": pb.T, "rate_limit": c.reference_rate_limit, "r_lo": c.stroke_margin,
                 "r_hi": pb.L - c.stroke_margin, "max_it": c.max_iterations,
                 "tol": c.tolerance, "rti": float(c.mode == "rti"),
                 "warm": float(c.warm_start), "u_c": pb.u_c, "u_s": pb.u_s, "v_scale": V_SCALE}
-        self._cfg = np.concatenate([[float(vals[k]) for k in CONFIG], pb.P])
+        self._cfg = np.concatenate([[float(vals[k]) for k in config(pb.nx)], pb.P])
         if self._cfg.size != so.wb_fast_config_size():
             raise CompileError("the compiled NMPC step does not match its settings")
         self._h = so.wb_fast_new(self._cfg.ctypes.data)
@@ -285,7 +293,7 @@ class CompiledNMPC:
             raise MemoryError(f"the compiled NMPC step could not allocate its work (at most "
                               f"{_MAX_LIVE} compiled NMPCs of one horizon alive at once)")
         weakref.finalize(self, so.wb_fast_free, self._h)
-        self._y = np.zeros(4)
+        self._y = np.zeros(pb.nx)
         self._u = np.zeros(1)
         self._yp, self._up = self._y.ctypes.data, self._u.ctypes.data
         self._call = so.wb_fast_sample
@@ -301,18 +309,18 @@ class CompiledNMPC:
         = (X (4, N + 1), U (1, N), u_prev, r_prev, z (4,), d, t[, working set]) of an
         :class:`~.results.NMPCState` (scaled as there; r_prev m, d N, t s; the QP's
         working set, :attr:`CompiledMemory.working_set`, or None: none active)."""
-        mem = CompiledMemory(self.pb.N, self._msize)
+        mem = CompiledMemory(self.pb.N, self._msize, self.pb.nx)
         if plan is not None:
             X, U, u_prev, r_prev, z, d, t, *ws = plan
             if ws and ws[0] is not None:                 # only a warm start: else none
                 ws = np.asarray(ws[0], dtype=float).ravel()
                 if ws.size == mem.working_set.size:
                     mem.working_set[:] = ws
-            n, b = 4 * (self.pb.N + 1), mem.buf
+            n, b = self.pb.nx * (self.pb.N + 1), mem.buf
             b[:n] = np.asarray(X, dtype=float).ravel(order="F")
             b[n:n + self.pb.N] = np.asarray(U, dtype=float).ravel()
             b[mem._at("u_prev")], b[mem._at("r_prev")] = u_prev, r_prev
-            b[mem._at("z"):mem._at("z") + 4] = z
+            b[mem._at("z"):mem._at("z") + self.pb.nx] = z
             b[mem._at("d")], b[mem._at("t")] = d, t
             b[mem._at("t") + 1] = 1.0                  # started
         return mem
@@ -328,7 +336,7 @@ class CompiledNMPC:
         sample).
         """
         if state is None:
-            state = CompiledMemory(self.pb.N, self._msize)
+            state = CompiledMemory(self.pb.N, self._msize, self.pb.nx)
         yy = self._y
         try:
             yy[0], yy[1], yy[2], yy[3] = y["x"], y["v"], y["p_a"], y["p_b"]
@@ -339,6 +347,8 @@ class CompiledNMPC:
             bad = [k for k, v in (*zip(NMPC_STATES, yy), ("reference", r)) if not isfinite(v)]
             raise InputError(f"the NMPC got a measurement or reference that is not a finite "
                              f"number: {', '.join(bad)}")
+        if self.pb.lines:
+            self._lines(state)
         if self.nmpc.preview is None:
             self._call(self._h, state.ptr, self._yp, r, self._up)
         else:
@@ -347,6 +357,14 @@ class CompiledNMPC:
         if self.pb.valve is not None:                  # planned in the compensated command
             return state, self.pb.valve(self._u[0])
         return state, self._u[0]
+
+    def _lines(self, state: CompiledMemory) -> None:
+        """The lumped lines' estimate (SI) after the measurement in the input buffer
+        (:meth:`.problem.Problem.measured_state`, on the memory's previous sample)."""
+        pb, yy = self.pb, self._y
+        started = state.buf[state._at("t") + 1] != 0.0
+        z, state.line_cov = pb.measured_state(yy[:4] / pb.sx[:4], state if started else None)
+        yy[4:] = z[4:] * pb.sx[4:]
 
     def _node_reference(self, state: CompiledMemory, r: float) -> None:
         """The previewed node reference (scaled) into the buffer the C sample reads."""

@@ -52,11 +52,18 @@ an upper block of N node rows, then per soft limit a lower and an upper block of
 
 from __future__ import annotations
 
-__all__ = ["DRIVER", "CONFIG"]
+__all__ = ["DRIVER", "CONFIG", "config"]
 
-#: offsets in the configuration vector of the driver (after them: the settings P)
+#: offsets in the configuration vector of the driver (after them: the settings P), for
+#: the 4-state model (:func:`config` for nx states)
 CONFIG = ("sx0", "sx1", "sx2", "sx3", "L", "T", "rate_limit", "r_lo", "r_hi", "max_it",
           "tol", "rti", "warm", "u_c", "u_s", "v_scale")
+
+
+def config(nx: int) -> tuple[str, ...]:
+    """:data:`CONFIG` for a model of ``nx`` states (their scales sx0 .. sx{nx-1} first:
+    with lumped lines the driver is given their estimate with the measurement)."""
+    return tuple(f"sx{i}" for i in range(nx)) + CONFIG[4:]
 
 DRIVER = r"""
 /* ---- driver: one NMPC sample around the generated step (workbench.controllers.mpc.fast) */
@@ -64,7 +71,7 @@ DRIVER = r"""
 #include <string.h>
 #include <time.h>
 #include <daqp/api.h>
-#define NX 4
+#define NX %(NX)d
 #define NN %(N)d
 #define NP %(NP)d
 #define NXN (NX * (NN + 1))

@@ -16,7 +16,7 @@ import numpy as np
 from ...errors import InputError
 from ...integrate import RK4, explicit_rk
 
-__all__ = ["STATE_EFFECTS", "NMPC_STATES", "V_SCALE", "VALVE_MAP_EFFECTS", "prediction_model",
+__all__ = ["STATE_EFFECTS", "NMPC_STATES", "LINE_STATES", "LINE_MODELS", "DESIGN_LINES", "V_SCALE", "Q_SCALE", "VALVE_MAP_EFFECTS", "prediction_model",
            "planning_model", "horizon_reference", "interval_maps", "interior_map",
            "friction_velocity", "MIN_FRICTION_VELOCITY", "MAX_SUBSTEPS"]
 
@@ -35,6 +35,25 @@ INVERSE_WIDTH = 0.1
 STATE_EFFECTS = ("valve_dynamics", "heat_transfer", "line_dynamics", "supply_droop")
 #: The states the NMPC measures and predicts, in the plant's order.
 NMPC_STATES = ("x", "v", "p_a", "p_b")
+#: The states a lumped line adds to the prediction (``lines="lumped"``), in the plant's
+#: order: each line as one segment, its node pressure (Pa) and its flow into the
+#: chamber (kg/s). Not measured: :mod:`.lines` estimates them.
+LINE_STATES = ("line_a_p0", "line_a_q0", "line_b_p0", "line_b_q0")
+#: How :func:`prediction_model` keeps the plant's lines: ``"volume"`` (their volume added
+#: to the dead volumes) or ``"lumped"`` (one segment per line as states).
+LINE_MODELS = ("volume", "lumped")
+#: How :func:`workbench.controllers.design` gives its NMPC a lined plant's lines
+#: (:data:`LINE_MODELS`). "volume": with the lines lumped in (``"lumped"``) the command
+#: activity on the precision rig's sine halves (test profile of
+#: tests/test_precision_positioning.py, seeds 0-4: 0.69-0.76 -> 0.35-0.36 V) and the
+#: tracking between reversals improves (0.4-0.5 -> 0.2-0.3 mm), but the piston sticks
+#: longer at the sine's reversal: worst error 0.47-0.88 -> 0.79-1.01 mm (seed 3 above the
+#: must-show's 1 mm), the perturbed rig (friction 1.5x, mass +10 %) 1.25 -> 2.53 mm with
+#: two holds pulsing. tests/test_mpc_lines.py runs the design with "lumped".
+DESIGN_LINES = "volume"
+#: kg/s: scale of a line's mass flow in the scaled state (about a quarter of the 25 mm
+#: rig valve's full flow, 44 g/s at 6 bar).
+Q_SCALE = 0.01
 #: m/s: velocity scale of the scaled state (position and pressures scale by stroke
 #: and supply pressure).
 V_SCALE = 1.0
@@ -48,8 +67,9 @@ MIN_FRICTION_VELOCITY = 1e-3
 MAX_SUBSTEPS = 8
 
 
-def prediction_model(plant, effects: Sequence[str] | None = None):
-    """The plant reduced to the four states x, v, p_a, p_b, for prediction.
+def prediction_model(plant, effects: Sequence[str] | None = None, lines: str = "volume"):
+    """The plant reduced to the four states x, v, p_a, p_b, for prediction (with
+    ``lines="lumped"``: and one segment per line, :data:`LINE_STATES`).
 
     Effects that add states are removed: spool dynamics, heat transfer, supply droop,
     and the lines, whose volume (pi/4 d^2 L_t each) is added to the dead volume of
@@ -69,20 +89,41 @@ def prediction_model(plant, effects: Sequence[str] | None = None):
     friction, deadband, leakage). Dry friction takes its smooth (differentiable) form;
     the NMPC predicts it with the width of :func:`friction_velocity`.
 
+    ``lines="lumped"`` keeps a plant's lines instead as one segment each (the plant's
+    own line law, :func:`workbench.physics.line.line_rates`, with the file's length
+    and bore): a node of the line's volume at the valve port and the line's flow into
+    the chamber through its inertance and friction. That puts the lines' lag between
+    command and chamber into the prediction (first mode a / L rad/s, 55 Hz for 1 m).
+    Measured (precision rig, NMPC's own closed-loop commands, seed 0, moving sections,
+    10 ms ahead, measured x, v, p_a, p_b, 300 Pa pressure noise; scratch
+    /tmp/h14j/pred2.py): position error 201 um rms with the line volume in the dead
+    volume, 43 um with one segment per line started from the rig's own line state
+    (its four segments averaged), 98 um with the line state estimated by
+    :mod:`.lines` (161 um by the segment model alone, without its correction from the
+    chamber pressures); pressures 11.5 / 4.0 / 6.6 kPa. Without lines in the plant it
+    is the 4-state model.
+
     Parameters
     ----------
     plant : workbench.Plant
     effects : sequence of str, optional
-        Effects to keep; one that adds states is refused.
+        Effects to keep; one that adds states is refused (``line_dynamics``: see
+        ``lines``).
+    lines : {"volume", "lumped"}
+        How the plant's lines enter (above).
 
     Returns
     -------
     workbench.Plant
     """
     from ...plant import Plant
+    if lines not in LINE_MODELS:
+        raise InputError(f"lines must be one of {', '.join(LINE_MODELS)}, got {lines!r}")
     params = plant.params
     have = tuple(plant.effects)
+    lumped = lines == "lumped" and "line_dynamics" in have
     keep = tuple(e for e in have if e not in STATE_EFFECTS) if effects is None else tuple(effects)
+    keep = tuple(e for e in keep if not (lumped and e == "line_dynamics"))
     bad = [e for e in keep if e in STATE_EFFECTS]
     if bad:
         raise InputError(f"the NMPC's prediction model has the states x, v, p_a, p_b only; "
@@ -91,7 +132,10 @@ def prediction_model(plant, effects: Sequence[str] | None = None):
     if unknown:
         raise InputError(f"effect(s) {', '.join(unknown)} to keep are not in the plant "
                          f"(it has: {', '.join(have) or 'none'})")
-    if "line_dynamics" in have:
+    if lumped:
+        keep = keep + ("line_dynamics",)
+        params = params.replace(**{"lines.segments": 1})
+    elif "line_dynamics" in have:
         v_line = math.pi / 4.0 * params["lines.diameter"] ** 2 * params["lines.length"]
         params = params.replace(**{
             "cylinder.dead_volume_a": params["cylinder.dead_volume_a"] + v_line,

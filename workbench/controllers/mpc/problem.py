@@ -13,7 +13,8 @@ import casadi as ca
 import numpy as np
 
 from .limits import FIRST_INTERVAL, interior_points
-from .model import V_SCALE, friction_velocity, interior_map, interval_maps, planning_model
+from .model import (NMPC_STATES, Q_SCALE, V_SCALE, friction_velocity, interior_map,
+                    interval_maps, planning_model)
 from .nlp import IpoptSolver
 from .qp import sqp_step
 
@@ -31,7 +32,8 @@ class Problem:
     Attributes
     ----------
     N, T, L : horizon, sample time (s), stroke (m).
-    sx : (4,) scales of x, v, p_a, p_b (m, m/s, Pa, Pa); u_c, u_s : command centre
+    sx : (nx,) scales of x, v, p_a, p_b (m, m/s, Pa, Pa) and of the lumped lines'
+        node pressures and flows (Pa, kg/s); nx 4 or 8, ``lines`` (8); u_c, u_s : command centre
         and span, V; w_lo, w_hi : scaled command range.
     lo, hi : scaled limits by state index; soft : (state index, slack index) of each
         soft limit; ns : number of slacks (stroke, pressure, speed).
@@ -54,9 +56,11 @@ class Problem:
 
     def __init__(self, c) -> None:
         self.c = c
-        self.nx = 4
         # plans in the deadband-compensated command (model.planning_model)
         self.model, self.valve = planning_model(c.model)
+        #: states predicted: x, v, p_a, p_b (measured), then the lumped lines' (estimated)
+        self.nx = len(self.model.state_names)
+        self.lines = self.nx > len(NMPC_STATES)
         self._scaling(self.model)
         self._limits(c)
         self.P = self._settings_vector(c)
@@ -83,6 +87,30 @@ class Problem:
         self.d_max = 0.5 * (self.p_sup - self.p_atm) * self.model.area_a
         self.step = sqp_step(self)
         self._ipopt: IpoptSolver | None = None
+        #: the lumped lines' filter (:func:`.lines.line_filter`), None without lines
+        self.line_step = self._line_step(c) if self.lines else None
+
+    def _line_step(self, c):
+        """The line-state filter, compiled to C with ``jit``."""
+        from .lines import line_filter
+        f = line_filter(self, c.pressure_noise)
+        if c.jit:
+            from ...integrate.jit import compiled
+            f = compiled(f)
+        return f
+
+    def measured_state(self, zm: np.ndarray, state) -> tuple[np.ndarray, np.ndarray | None]:
+        """(scaled state the plan starts from, line covariance) from the measured x, v,
+        p_a, p_b (scaled) and the previous sample's memory (None: the first sample):
+        with lumped lines their states estimated (:mod:`.lines`), else ``zm``."""
+        if not self.lines:
+            return zm, None
+        from .lines import line_start
+        if state is None or getattr(state, "line_cov", None) is None:
+            return line_start(zm, self.nx)
+        z, Pl = self.line_step(np.asarray(state.z, dtype=float), float(state.u_prev),
+                               float(state.d), zm[:len(NMPC_STATES)], state.line_cov)
+        return np.asarray(z, dtype=float).ravel(), np.asarray(Pl, dtype=float).ravel()
 
     def _scaling(self, m) -> None:
         """Horizon, sample time and the scales of states and command."""
@@ -96,7 +124,8 @@ class Problem:
         self.u_s = float(prm["valve.command_span"])
         self.w_lo = (float(prm["valve.command_min"]) - self.u_c) / self.u_s
         self.w_hi = (float(prm["valve.command_max"]) - self.u_c) / self.u_s
-        self.sx = np.array([L, V_SCALE, p_sup, p_sup])
+        lines = [p_sup, Q_SCALE, p_sup, Q_SCALE] if len(m.state_names) > len(NMPC_STATES) else []
+        self.sx = np.array([L, V_SCALE, p_sup, p_sup, *lines])
 
     def _limits(self, c) -> None:
         """Scaled limits of the constrained states and their slacks."""

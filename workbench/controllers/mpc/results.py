@@ -42,11 +42,13 @@ class NMPCState:
 
     Attributes
     ----------
-    X : casadi.DM (4, N + 1), predicted states, scaled (x/L, v/(1 m/s), p/p_supply)
+    X : casadi.DM (nx, N + 1), predicted states, scaled (x/L, v/(1 m/s), p/p_supply;
+        with lumped lines also their node pressures and flows, :attr:`Problem.sx`)
         (a numpy array after a compiled sample, :mod:`.fast`).
     U : casadi.DM (1, N), planned commands, scaled ((u - centre)/span) (ditto).
     u_prev : scaled command applied last. r_prev : m, reference at the last sample.
-    z : (4,) measured state at the last sample, scaled.
+    z : (nx,) measured state at the last sample, scaled (with lumped lines: their
+        estimated states after it).
     d : N, estimated disturbance force (along -x, like ``load.external_force``).
     lam : (lam_x, lam_g) of the last IPOPT solve (mode "ipopt"), else None.
     info : StepInfo of the last update.
@@ -54,6 +56,7 @@ class NMPCState:
     working_set : after a compiled sample (:mod:`.fast`), the working set of its last
         QP (the bounds, then the rows: +1 upper, -1 lower, 0 inactive), where its next
         QP starts; else None.
+    line_cov : (16,) covariance of the lumped lines' estimate (:mod:`.lines`), else None.
     """
 
     X: Any
@@ -66,6 +69,7 @@ class NMPCState:
     info: StepInfo | None = None
     t: float = 0.0
     working_set: Any = None
+    line_cov: Any = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -38,8 +38,8 @@ __all__ = ["advance", "solution", "compiled_sample", "node_reference", "admissib
 class _Sample:
     """What the solvers need of one sample, scaled.
 
-    z : (4,) measured state. R, VR : (1, N + 1) reference position and velocity at
-    the nodes. u_prev : command applied since the last sample. z_prev : (4,)
+    z : (nx,) measured state (with lumped lines: their estimate). R, VR : (1, N + 1) reference position and velocity at
+    the nodes. u_prev : command applied since the last sample. z_prev : (nx,)
     measured state one sample ago.
     """
 
@@ -65,7 +65,7 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     fast = compiled_sample(pb)[0]
     if fast is not None:
         return _advance_compiled(pb, fast, y, r, state, t0)
-    zm = _measured(y, r) / pb.sx
+    zm, line_cov = pb.measured_state(_measured(y, r) / pb.sx[:len(NMPC_STATES)], state)
     t = 0.0 if state is None else state.t + pb.T
     R, VR = node_reference(pb, r, None if state is None else state.r_prev, t)
     R, VR = admissible(pb, R, VR)
@@ -87,7 +87,8 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
         X, U = _previous_plan(pb, state, zm)
     w0 = float(U[0])
     info = _step_info(pb, it, ok, viol, restarted, time.perf_counter() - t0)
-    return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info, t=t)
+    return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info, t=t,
+                     line_cov=line_cov)
 
 
 def _measured(y: dict, r: float) -> np.ndarray:
@@ -166,13 +167,15 @@ def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
         mem = fast.memory(None if state is None else
                           (state.X, state.U, state.u_prev, state.r_prev, state.z, state.d,
                            state.t, state.working_set))
+        mem.line_cov = None if state is None else state.line_cov
     pb._compiled_last = None                           # mem changes: no state matches it
     mem, _ = fast.update(mem, r, y)
     b, o = mem.buf, mem._off
     new = NMPCState(X=mem.X.copy(), U=mem.U[None, :].copy(), u_prev=float(b[o["u_prev"]]),
-                    r_prev=r, z=b[o["z"]:o["z"] + 4].copy(), d=float(b[o["d"]]), lam=None,
+                    r_prev=r, z=b[o["z"]:o["z"] + pb.nx].copy(), d=float(b[o["d"]]), lam=None,
                     info=mem.step_info(pb, time.perf_counter() - t0), t=float(b[o["t"]]),
-                    working_set=b[o["ws"]:].copy())
+                    working_set=b[o["ws"]:].copy(),
+                    line_cov=None if mem.line_cov is None else mem.line_cov.copy())
     for a in (new.X, new.U, new.z, new.working_set):
         a.flags.writeable = False
     pb._compiled_last = (new, mem)
