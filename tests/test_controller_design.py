@@ -508,3 +508,23 @@ def test_pid_feeds_the_sliding_friction_into_a_reversal_not_into_a_stop():
     sliding = 15.0 * (1 - math.tanh(5.0) ** 2) / 0.001
     assert got[False] == pytest.approx(sliding * -1.0 / 5000.0, rel=1e-9)
     assert got[True] == pytest.approx(float(fr.slope(0.005)) * -1.0 / 5000.0, rel=1e-9)
+
+
+def test_fl_breakaway_probe_keeps_the_force_overshoot_to_a_share_of_the_stribeck_excess():
+    # probe = 0.3 / (k2 tau): k2 = 3 lambda, tau = sqrt(2 q m / (F_s - F_c)) + L / c
+    # (a quantum of travel under the jump's acceleration, then the lines' delay);
+    # precision rig: 1.2 kg, 25 / 15 N, q = 0.5 m / 4096, 1 m lines
+    from dataclasses import replace
+    from workbench.controllers.design import breakaway_probe
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    q = 0.5 / 4096
+    lam = 40.0
+    tau = math.sqrt(2 * q * 1.2 / 10.0) + 1.0 / math.sqrt(1.4 * 287.0 * 293.15)
+    assert breakaway_probe(plant, lam, q) == pytest.approx(0.3 / (3 * lam * tau), rel=1e-3)
+    fl = design(plant, "fl", jit=False).inner.inner
+    assert fl.probe == pytest.approx(breakaway_probe(plant, fl.bandwidth, q), rel=1e-12)
+    # no Stribeck excess (F_s = F_c): the force target leads by nothing to scale
+    flat = plant.with_params(**{"friction.static": 15.0})
+    assert breakaway_probe(flat, lam, q) == 1.0
+    with pytest.raises(InputError, match="probe"):
+        replace(fl, probe=0.0)
