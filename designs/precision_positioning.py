@@ -196,7 +196,7 @@ def _cells(f: dict) -> list[str]:
     """Steady state worst and median (mm), overshoot (%), sine worst (mm) of
     :func:`figures`, as table cells."""
     return [_cell(f["steady_state_worst"] * 1e3, 3), _cell(f["steady_state_median"] * 1e3, 3),
-            _cell(f["overshoot_pct"], 1), _cell(f["sine_worst"] * 1e3, 2)]
+            _cell(f["overshoot_pct"], 2), _cell(f["sine_worst"] * 1e3, 2)]
 
 
 def _seed_section(seeds: dict) -> "rp.Section":

@@ -195,15 +195,16 @@ class DesignEvaluation:
                      for h in self.holds]
         fig = rp.Figure(plots.validation_figure(v, title=f"{name} on the full plant"),
                         "Reference and position, command, chamber pressures", width=0.9)
+        # one section, the figure first: a figure is never split, and one that does
+        # not fit the rest of a page lets the blocks after it in its section go
+        # first (report.pdf_flow.float_figures). With the figure after the tables
+        # (session 9) nothing was left to fill that rest (page 4 40 % empty), and
+        # with the controller's table in a section of its own before it the figure
+        # moved with its heading (page 2 40 % empty, session 10)
         return [
-            rp.Section(f"{name}: controller", [rp.KeyValues(kv)]),
-            # the figure first, the tables after it: a figure is never split, and
-            # the flow lets the text blocks after a figure that does not fit the
-            # page's rest go first (report.pdf_flow.float_figures). With the
-            # figure last no table was left to fill that rest: the precision
-            # report's page 4 was 40 % empty before the FL figure (session 9)
-            rp.Section(f"{name}: precision validation", [
+            rp.Section(f"{name}: controller and precision validation", [
                 fig,
+                rp.KeyValues(kv),
                 rp.Table(["check", "limit", "unit", "value", "pass"], rows,
                          caption=f"{name} on the full plant, precision specification"),
                 rp.Table(["hold", "steady-state error", "peak-to-peak, 2nd half",

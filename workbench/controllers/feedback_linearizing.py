@@ -448,6 +448,10 @@ class FeedbackLinearizing:
         one, it adds no sensor noise at a hold (v_r = 0: nothing). While the
         reference slows towards rest only the law's sliding part is fed
         (:meth:`_fed_law`).
+    probe : share of the Stribeck excess F_s - F_c by which a stuck piston's force
+        target leads the force once it is beyond the file's F_s (the rig holds more
+        than the file says): the force then rises at k2 probe (F_s - F_c) N/s
+        (:func:`~workbench.controllers.design.breakaway_probe`; default 1).
     friction_lag : s, time in which the outside estimate takes the friction over
         from the feedforward (:func:`~workbench.controllers.design.design`: the
         observer's time constant, so the friction is never counted twice); 0: the
@@ -466,6 +470,7 @@ class FeedbackLinearizing:
     preview: Any = None
     friction: Any = None
     friction_lag: float = 0.0
+    probe: float = 1.0
     gains: dict = field(init=False)
 
     kind = "feedback linearising"
@@ -484,6 +489,9 @@ class FeedbackLinearizing:
         lag = self.friction_lag
         if isinstance(lag, bool) or not isinstance(lag, (int, float)) or not (math.isfinite(lag) and lag >= 0):
             raise InputError(f"friction_lag must be >= 0 s, got {lag!r}")
+        pr = self.probe
+        if isinstance(pr, bool) or not isinstance(pr, (int, float)) or not (math.isfinite(pr) and pr > 0):
+            raise InputError(f"probe must be a share > 0, got {pr!r}")
         if self.friction is not None and not (callable(self.friction) and all(
                 hasattr(self.friction, k) for k in ("slope", "static", "coulomb"))):
             raise InputError("friction must be a law v (m/s) -> force (N) with its slope and "
@@ -601,12 +609,14 @@ class FeedbackLinearizing:
                 # stuck, the reference moving on: the force to beat is the static
                 # friction in that direction, not the holding force the estimate has;
                 # a force beyond the model's F_s that has not moved the piston says the
-                # rig's is larger: it is then taken as that force plus the Stribeck
-                # excess F_s - F_c, so the law keeps raising the force at k2 (F_s -
-                # F_c) / m of jerk until the piston moves (on a rig with 1.5 x the
-                # friction the force approached the model's F_s and stopped there)
+                # rig's is larger: it is then taken as that force plus ``probe`` times
+                # the Stribeck excess F_s - F_c, so the law keeps raising the force at
+                # k2 probe (F_s - F_c) / m of jerk until the piston moves (on a rig
+                # with 1.5 x the friction the force approached the model's F_s and
+                # stopped there)
                 fs, fc = float(self.friction.static), float(self.friction.coulomb)
-                d = brk[0] * max(fs, brk[0] * (F - m.external_force) + (fs - fc))
+                d = brk[0] * max(fs, brk[0] * (F - m.external_force)
+                                  + self.probe * (fs - fc))
                 f_lag = f_fed
             elif was is not None:
                 # broke away: the friction drops to its sliding level now, the
