@@ -122,6 +122,9 @@ def test_the_typical_shortest_jump_is_the_median_of_the_three_smallest_moves():
     assert not h.no_better({**s, "seen+": ((0.3, 1.0), (0.3, 1.2), (0.3, 2.0))}, e)
     assert not h.no_better(s, -e)                   # the other way: no moves seen
     assert not h.no_better({**s, "seen+": ((0.2, 0.0),)}, e)
+    # one move: only from a pulse at the threshold (within x grow of a no-move)
+    assert not h.no_better({**s, "seen+": ((0.3, 3.0),)}, e)
+    assert h.no_better({**s, "seen+": ((0.3, 3.0),), "stay+": 0.25}, e)
     # _adapt keeps the outcome of every pulse, by strength, the last SEEN of them
     s = {**h.reset(), "dir": 1.0, "x0": 0.25, "a": 0.6, "pending": True}
     h._adapt(s, 0.25 + 10 * Q, 20 * Q)

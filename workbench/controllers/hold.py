@@ -338,11 +338,16 @@ class HoldPositioner:
         lucky 1-quantum move (FL, test profile: 17 command changes in the second half;
         1.5x friction, NMPC: 19); counted only at the bracket's lower end, as before,
         a walk's strong pulses set it (a stretched pulse's 9 quanta stopped a PID hold
-        0.43 mm off)."""
-        moves = sorted(round(j) for _, j in s.get("seen+" if e > 0 else "seen-", ())
-                       if j >= 0.5)[:JUMPS]
-        if not moves:
-            return False
+        0.43 mm off). A single move counts only from a pulse at the threshold (within
+        x ``grow`` of the strongest that did not move): a first pulse that already
+        moved the piston 3 quanta says nothing of a weaker one (NMPC on the foreign
+        LuGre rig, tests/test_foreign_loop.py: held one quantum off, 0.142 mm)."""
+        sign = "+" if e > 0 else "-"
+        seen = [(a, j) for a, j in s.get("seen" + sign, ()) if j >= 0.5]
+        moves = sorted(round(j) for _, j in seen)[:JUMPS]
+        top = s.get("stay" + sign, 0.0) * self.grow * (1 + 1e-9)
+        if not moves or (len(moves) == 1 and seen[0][0] > top):
+            return False                             # one move, not at the threshold
         m = moves[len(moves) // 2]
         return abs(e) <= 0.5 * m * self.quantum * (1 + 1e-9)
 
