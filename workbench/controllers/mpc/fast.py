@@ -48,7 +48,7 @@ from ...integrate.jit import (MINMAX, CompileError, cache_dir, have_compiler,
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
 from .fast_c import DRIVER, config
-from .qp import apply_step, daqp_primal_tol, intervals
+from .qp import SQP_CONTRACTION, SQP_DAMPING, apply_step, daqp_primal_tol, intervals
 from .results import StepInfo
 
 __all__ = ["CompiledNMPC", "CompiledMemory", "compiled_unavailable"]
@@ -111,7 +111,8 @@ def _source(pb) -> str:
         "NC": nc,
         "NRN": 2 * pb.N * len(pb.soft), "MINT": pb.m_int,
         "KI0": pb.first_interior, "PRIMAL_TOL": daqp_primal_tol(pb) or 0.0, "QP_TOL": QP_TOL,
-        "QP_ROUNDS": QP_ROUNDS, "QP_WARM": int(QP_WARM), **_settings_layout(pb),
+        "QP_ROUNDS": QP_ROUNDS, "QP_WARM": int(QP_WARM), "SQP_CONTRACTION": SQP_CONTRACTION,
+        "SQP_DAMPING": SQP_DAMPING, **_settings_layout(pb),
         "NSOFT": len(pb.soft), "SOFT_I": ", ".join(str(i) for i, _ in pb.soft),
         "SOFT_J": ", ".join(str(j) for _, j in pb.soft), "W_LO": float(pb.w_lo),
         "W_HI": float(pb.w_hi)}

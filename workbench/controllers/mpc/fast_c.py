@@ -88,6 +88,8 @@ DRIVER = r"""
 #define PRIMAL_TOL %(PRIMAL_TOL)r  /* DAQP's primal_tol (qp.daqp_primal_tol; 0: its default) */
 #define QP_ROUNDS %(QP_ROUNDS)d
 #define QP_WARM %(QP_WARM)d
+#define SQP_CONTRACTION %(SQP_CONTRACTION)r
+#define SQP_DAMPING %(SQP_DAMPING)r
 %(CFG)s
 #define C_P %(NCFG)d
 /* the condensed QP (qp.condense): settings P's layout (Problem.unpack), soft limits
@@ -434,13 +436,29 @@ static int step(wb_fast_t *h, double sh, double up, double dprev, double est) {
 /* up to iters steps (update.py's _sqp): the estimate is updated in the first only */
 static int sqp(wb_fast_t *h, int shift, double up, double *dprev, double *est, int iters,
                double *d, int *ok) {
-  int it; double sh = shift ? 1.0 : 0.0;
+  int it, i, damp = h->cfg[C_rti] == 0.0;
+  double sh = shift ? 1.0 : 0.0, a = 1.0, prev = INFINITY, back, dup[NN];
   *ok = 0; *d = *dprev;
   for (it = 1; it <= iters; ++it) {
     *ok = step(h, sh, up, *dprev, *est);
     if (it == 1) { *d = *dprev = h->dd; *est = 0.0; }
     if (!*ok) break;
-    memcpy(h->X, h->Xn, sizeof(double) * NXN); memcpy(h->U, h->Un, sizeof(double) * NN);
+    /* mode sqp: halve the step taken at each step that does not contract and turns
+       the commands back (update.py's _sqp) */
+    back = 0.0;
+    for (i = 0; i < NN; ++i) {
+      double du = h->Un[i] - h->U[i];
+      if (it > 1) back += du * dup[i];
+      dup[i] = du;
+    }
+    if (damp && it > 1 && h->stp >= SQP_CONTRACTION * prev && back < 0.0) a *= SQP_DAMPING;
+    prev = h->stp;
+    if (a == 1.0) {
+      memcpy(h->X, h->Xn, sizeof(double) * NXN); memcpy(h->U, h->Un, sizeof(double) * NN);
+    } else {
+      for (i = 0; i < NXN; ++i) h->X[i] += a * (h->Xn[i] - h->X[i]);
+      for (i = 0; i < NN; ++i) h->U[i] += a * (h->Un[i] - h->U[i]);
+    }
     sh = 0.0;
     if (h->stp < h->cfg[C_tol]) break;
   }

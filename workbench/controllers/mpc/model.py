@@ -45,11 +45,19 @@ LINE_MODELS = ("volume", "lumped")
 #: How :func:`workbench.controllers.design` gives its NMPC a lined plant's lines
 #: (:data:`LINE_MODELS`). "volume": with the lines lumped in (``"lumped"``) the command
 #: activity on the precision rig's sine halves (test profile of
-#: tests/test_precision_positioning.py, seeds 0-4: 0.69-0.76 -> 0.35-0.36 V) and the
+#: tests/test_precision_positioning.py, seeds 0-4: 0.69-0.76 -> 0.34-0.37 V) and the
 #: tracking between reversals improves (0.4-0.5 -> 0.2-0.3 mm), but the piston sticks
 #: longer at the sine's reversal: worst error 0.47-0.88 -> 0.79-1.01 mm (seed 3 above the
 #: must-show's 1 mm), the perturbed rig (friction 1.5x, mass +10 %) 1.25 -> 2.53 mm with
-#: two holds pulsing. tests/test_mpc_lines.py runs the design with "lumped".
+#: two holds pulsing. The worst point is the reversal at the sine's top on every seed:
+#: the piston sticks about 0.1 s (the smooth friction lets a stuck piston creep in the
+#: prediction; the faster, mispredicted 4-state loop broke it away sooner). What is
+#: left of the oscillation is at 87 Hz, the rig line's quarter wave a / 4L, where one
+#: segment has its mode at 57 Hz (2 segments 70 Hz, the rig's 4 79 Hz). Tried with
+#: "lumped": position tolerance 1 mm, sine 0.61-0.95 mm on seeds 0-4, activity
+#: 0.39-0.43 V, perturbed rig 2.18 mm and a hold pulsing; command-rate tolerance
+#: 0.1 V, activity 0.10-0.14 V but sine 1.16-1.24 mm (seeds 0, 3).
+#: tests/test_mpc_lines.py runs the design with "lumped".
 DESIGN_LINES = "volume"
 #: kg/s: scale of a line's mass flow in the scaled state (about a quarter of the 25 mm
 #: rig valve's full flow, 44 g/s at 6 bar).

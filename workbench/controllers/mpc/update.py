@@ -20,6 +20,7 @@ plans, bit for bit on the tests); :func:`compiled_sample` says why not otherwise
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -29,6 +30,7 @@ import numpy as np
 from ...errors import InputError
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
+from .qp import SQP_CONTRACTION, SQP_DAMPING
 from .results import NMPCState, Solution, StepInfo
 
 __all__ = ["advance", "solution", "compiled_sample", "node_reference", "admissible"]
@@ -204,13 +206,17 @@ def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: floa
 
 
 def _sqp(pb, X, U, shift: bool, s: _Sample, dprev: float, est: float, iters: int):
-    """Up to ``iters`` full Gauss-Newton steps; stops at a step below tolerance.
+    """Up to ``iters`` Gauss-Newton steps; stops at a full step below tolerance.
 
-    The force estimate is updated in the first step only (``est``).
+    The force estimate is updated in the first step only (``est``). In mode sqp the
+    steps taken are halved (:data:`SQP_DAMPING`) at each full step that is not below
+    :data:`SQP_CONTRACTION` times the one before and turns the commands back (its
+    moves against the previous step's: a cycle; the compiled sample likewise).
     Returns (X, U, iterations, success, violations, force estimate).
     """
     ok, it, viol, d = False, 0, None, dprev
     sh = 1.0 if shift else 0.0
+    a, prev, dprev_u, damp = 1.0, math.inf, None, pb.c.mode == "sqp"
     for it in range(1, iters + 1):
         Xn, Un, _, viol, okk, stp, dd = pb.step(X, U, sh, s.z, s.R, s.VR, s.u_prev, s.z_prev,
                                                 dprev, est, pb.P)
@@ -220,8 +226,15 @@ def _sqp(pb, X, U, shift: bool, s: _Sample, dprev: float, est: float, iters: int
             est = 0.0
         if not ok:
             break
-        X, U, sh = Xn, Un, 0.0
-        if float(stp) < pb.c.tolerance:
+        stp = float(stp)
+        du = np.asarray(Un - U, dtype=float).ravel()
+        if (damp and it > 1 and stp >= SQP_CONTRACTION * prev
+                and float(np.dot(du, dprev_u)) < 0.0):   # not contracting, turned back
+            a *= SQP_DAMPING
+        prev, dprev_u = stp, du
+        X, U = (Xn, Un) if a == 1.0 else (X + a * (Xn - X), U + a * (Un - U))
+        sh = 0.0
+        if stp < pb.c.tolerance:
             break
     return X, U, it, ok, viol, d
 
