@@ -45,9 +45,11 @@ LINE_STATES = ("line_a_p0", "line_a_q0", "line_b_p0", "line_b_q0")
 #: wave 86 Hz) and measured better (precision rig, test profile, design with
 #: "lumped", seeds 0-4): command activity on the sine 0.25-0.27 V (one segment
 #: 0.34-0.37 V), sine worst 0.68-0.91 mm (0.79-1.01 mm), every hold at rest; perturbed
-#: rig 1.95 mm with a hold pulsing (2.53 mm, two). But 12 states: median 1.13-1.16 ms
-#: per sample wall on the loaded machine (one segment 0.59-0.94 ms, 4-state 0.29 ms),
-#: and the compiled sample took minutes to build there. One segment is the default.
+#: rig 1.95 mm with a hold pulsing (2.53 mm, two). But 12 states: 1.03 ms CPU per
+#: update (compiled sample, N = 40, 2 ms; one segment 0.41 ms, the 4-state model
+#: 0.16-0.18 ms; interleaved, /tmp/h14j/timing.py), over the NMPC's 1 ms, and the
+#: compiled sample took minutes to build on the loaded machine. One segment is the
+#: default.
 LUMPED_SEGMENTS = 1
 
 
