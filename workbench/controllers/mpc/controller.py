@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 
 from ...errors import InputError
-from .model import LINE_STATES, NMPC_STATES, prediction_model
+from .model import NMPC_STATES, line_states, prediction_model
 from .problem import Problem
 from .results import NMPCState, Solution
 from .update import advance, solution
@@ -233,10 +233,12 @@ def _check_model(c: NMPC) -> None:
     names = getattr(model, "state_names", None)
     if names is None:
         raise InputError(f"model must be a workbench.Plant, got {type(model).__name__}")
-    if tuple(names) not in (NMPC_STATES, NMPC_STATES + LINE_STATES):
+    from . import model as _model
+    lumped = line_states(_model.LUMPED_SEGMENTS)
+    if tuple(names) not in (NMPC_STATES, NMPC_STATES + lumped):
         raise InputError(
             f"the NMPC predicts the states {', '.join(NMPC_STATES)} it measures (and "
-            f"lumped lines' {', '.join(LINE_STATES)}); this model has {', '.join(names)}. "
+            f"lumped lines' {', '.join(lumped)}); this model has {', '.join(names)}. "
             "Build the prediction model with mpc.prediction_model(plant) or "
             "NMPC.for_plant(plant, ...)")
     if getattr(model, "friction", "smooth") != "smooth" and model.params.has_effect("dry_friction"):

@@ -1,8 +1,9 @@
 """The NMPC's estimate of its lumped lines' states (``lines="lumped"``).
 
 The NMPC measures x, v, p_a, p_b; its prediction model with lumped lines
-(:func:`.model.prediction_model`) also has each line's node pressure and flow into
-the chamber (:data:`.model.LINE_STATES`), which no rig measures. They are estimated
+(:func:`.model.prediction_model`) also has each line's node pressures and segment
+flows (:data:`.model.LINE_STATES` for one segment per line,
+:func:`.model.line_states`), which no rig measures. They are estimated
 each sample by a Kalman filter on the NMPC's own model (extended: linearised along
 the estimate):
 
@@ -63,37 +64,44 @@ def line_noise(pb, pressure_noise: float) -> tuple[np.ndarray, np.ndarray]:
     cond = prm.get("valve.sonic_conductance")
     q_full = (float(cond) * p_sup * _RHO0 if cond else 4.0 * sx[5])
     sq = FLOW_NOISE * q_full
-    v_node = math.pi / 4.0 * float(prm["lines.diameter"]) ** 2 * float(prm["lines.length"])
+    names = pb.model.state_names
+    n_seg = (nx - 4) // 4
+    v_node = (math.pi / 4.0 * float(prm["lines.diameter"]) ** 2 * float(prm["lines.length"])
+              / n_seg)
     sp = GAMMA * R_AIR * float(prm["gas.temperature"]) * sq * T / v_node
     q = np.zeros(nx)
-    q[4:] = [sp / sx[4], sq / sx[5], sp / sx[6], sq / sx[7]]
+    for i in range(4, nx):
+        q[i] = (sp if names[i][7] == "p" else sq) / sx[i]
     s_meas = max(float(pressure_noise), PRESSURE_FLOOR * p_sup) / p_sup
     return np.diag(q ** 2), np.eye(2) * s_meas ** 2
 
 
 def line_start(zm: np.ndarray, nx: int) -> tuple[np.ndarray, np.ndarray]:
-    """(scaled state, line covariance (4, 4) flattened) of the first sample: the lines
-    at rest at the measured chamber pressures ``zm`` (scaled x, v, p_a, p_b)."""
-    z = np.concatenate([zm[:4], [zm[2], 0.0, zm[3], 0.0]])
-    return z[:nx], np.zeros(16)
+    """(scaled state, line covariance (nl, nl) flattened, nl = nx - 4) of the first
+    sample: the lines at rest at the measured chamber pressures ``zm`` (scaled x, v,
+    p_a, p_b): node pressures those of their chamber, no flow."""
+    n = (nx - 4) // 4
+    line = [zm[2]] * n + [0.0] * n + [zm[3]] * n + [0.0] * n
+    return np.concatenate([zm[:4], line]), np.zeros((nx - 4) ** 2)
 
 
 def line_filter(pb, pressure_noise: float) -> ca.Function:
     """The filter's step as a CasADi function ``wb_nmpc_lines(zprev, w, d, zm, Pl) ->
     (z, Pl_next)``: the previous scaled state (nx,), the command applied since (scaled),
     the force estimate (N), the measured x, v, p_a, p_b (scaled) and the line states'
-    covariance (16,: 4 x 4 column-major); the state with the lines estimated and
-    their new covariance."""
+    covariance (nl^2,: nl x nl column-major, nl = nx - 4); the state with the lines
+    estimated and their new covariance."""
     nx = pb.nx
+    nl = nx - 4
     Q, R = line_noise(pb, pressure_noise)
     zprev = ca.SX.sym("zprev", nx)
     w, d = ca.SX.sym("w"), ca.SX.sym("d")
     zm = ca.SX.sym("zm", len(NMPC_STATES))
-    Pl = ca.SX.sym("Pl", 16)
+    Pl = ca.SX.sym("Pl", nl * nl)
     zpred, A, _ = pb.Fj(zprev, w, d)
     P0 = ca.SX.zeros(nx, nx)
     P0[2, 2] = P0[3, 3] = R[0, 0]
-    P0[4:, 4:] = ca.reshape(Pl, 4, 4)
+    P0[4:, 4:] = ca.reshape(Pl, nl, nl)
     Pp = ca.mtimes([A, P0, A.T]) + ca.DM(Q)
     H = ca.DM(np.eye(nx)[2:4, :])
     S = ca.mtimes([H, Pp, H.T]) + ca.DM(R)
@@ -103,5 +111,5 @@ def line_filter(pb, pressure_noise: float) -> ca.Function:
     Pn = Pp - ca.mtimes([K, H, Pp])
     Pn = 0.5 * (Pn + Pn.T)
     return ca.Function("wb_nmpc_lines", [zprev, w, d, zm, Pl],
-                       [ca.vertcat(zm, line), ca.reshape(Pn[4:, 4:], 16, 1)],
+                       [ca.vertcat(zm, line), ca.reshape(Pn[4:, 4:], nl * nl, 1)],
                        ["zprev", "w", "d", "zm", "Pl"], ["z", "Pl_next"])

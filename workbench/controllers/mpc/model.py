@@ -16,9 +16,10 @@ import numpy as np
 from ...errors import InputError
 from ...integrate import RK4, explicit_rk
 
-__all__ = ["STATE_EFFECTS", "NMPC_STATES", "LINE_STATES", "LINE_MODELS", "DESIGN_LINES", "V_SCALE", "Q_SCALE", "VALVE_MAP_EFFECTS", "prediction_model",
-           "planning_model", "horizon_reference", "interval_maps", "interior_map",
-           "friction_velocity", "MIN_FRICTION_VELOCITY", "MAX_SUBSTEPS"]
+__all__ = ["STATE_EFFECTS", "NMPC_STATES", "LINE_STATES", "LINE_MODELS", "DESIGN_LINES",
+           "LUMPED_SEGMENTS", "line_states", "V_SCALE", "Q_SCALE", "VALVE_MAP_EFFECTS",
+           "prediction_model", "planning_model", "horizon_reference", "interval_maps",
+           "interior_map", "friction_velocity", "MIN_FRICTION_VELOCITY", "MAX_SUBSTEPS"]
 
 #: Effects of the valve's static command map that the NMPC plans through (it plans in
 #: the compensated command; see :func:`planning_model`).
@@ -39,6 +40,27 @@ NMPC_STATES = ("x", "v", "p_a", "p_b")
 #: order: each line as one segment, its node pressure (Pa) and its flow into the
 #: chamber (kg/s). Not measured: :mod:`.lines` estimates them.
 LINE_STATES = ("line_a_p0", "line_a_q0", "line_b_p0", "line_b_q0")
+#: Segments per line of ``lines="lumped"`` (the NMPC accepts a model with this many).
+#: Two segments put the line's mode at 70 Hz instead of 57 Hz (the rig line's quarter
+#: wave 86 Hz) and measured better (precision rig, test profile, design with
+#: "lumped", seeds 0-4): command activity on the sine 0.25-0.27 V (one segment
+#: 0.34-0.37 V), sine worst 0.68-0.91 mm (0.79-1.01 mm), every hold at rest; perturbed
+#: rig 1.95 mm with a hold pulsing (2.53 mm, two). But 12 states: 1.03 ms CPU per
+#: update (compiled sample, N = 40, 2 ms; one segment 0.41 ms, the 4-state model
+#: 0.16-0.18 ms; interleaved, /tmp/h14j/timing.py), over the NMPC's 1 ms, and the
+#: compiled sample took minutes to build on the loaded machine. One segment is the
+#: default.
+LUMPED_SEGMENTS = 1
+
+
+def line_states(segments: int) -> tuple[str, ...]:
+    """The lumped lines' state names for ``segments`` per line, in the plant's order
+    (:data:`LINE_STATES` for one)."""
+    out = []
+    for side in ("a", "b"):
+        out += [f"line_{side}_p{j}" for j in range(segments)]
+        out += [f"line_{side}_q{j}" for j in range(segments)]
+    return tuple(out)
 #: How :func:`prediction_model` keeps the plant's lines: ``"volume"`` (their volume added
 #: to the dead volumes) or ``"lumped"`` (one segment per line as states).
 LINE_MODELS = ("volume", "lumped")
@@ -56,7 +78,8 @@ LINE_MODELS = ("volume", "lumped")
 #: segment has its mode at 57 Hz (2 segments 70 Hz, the rig's 4 79 Hz). Tried with
 #: "lumped": position tolerance 1 mm, sine 0.61-0.95 mm on seeds 0-4, activity
 #: 0.39-0.43 V, perturbed rig 2.18 mm and a hold pulsing; command-rate tolerance
-#: 0.1 V, activity 0.10-0.14 V but sine 1.16-1.24 mm (seeds 0, 3).
+#: 0.1 V, activity 0.10-0.14 V but sine 1.16-1.24 mm (seeds 0, 3). Two segments per
+#: line: :data:`LUMPED_SEGMENTS`.
 #: tests/test_mpc_lines.py runs the design with "lumped".
 DESIGN_LINES = "volume"
 #: kg/s: scale of a line's mass flow in the scaled state (about a quarter of the 25 mm
@@ -142,7 +165,7 @@ def prediction_model(plant, effects: Sequence[str] | None = None, lines: str = "
                          f"(it has: {', '.join(have) or 'none'})")
     if lumped:
         keep = keep + ("line_dynamics",)
-        params = params.replace(**{"lines.segments": 1})
+        params = params.replace(**{"lines.segments": LUMPED_SEGMENTS})
     elif "line_dynamics" in have:
         v_line = math.pi / 4.0 * params["lines.diameter"] ** 2 * params["lines.length"]
         params = params.replace(**{

@@ -124,7 +124,7 @@ class Problem:
         self.u_s = float(prm["valve.command_span"])
         self.w_lo = (float(prm["valve.command_min"]) - self.u_c) / self.u_s
         self.w_hi = (float(prm["valve.command_max"]) - self.u_c) / self.u_s
-        lines = [p_sup, Q_SCALE, p_sup, Q_SCALE] if len(m.state_names) > len(NMPC_STATES) else []
+        lines = [p_sup if n[7] == "p" else Q_SCALE for n in m.state_names[len(NMPC_STATES):]]
         self.sx = np.array([L, V_SCALE, p_sup, p_sup, *lines])
 
     def _limits(self, c) -> None:

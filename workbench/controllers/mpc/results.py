@@ -56,7 +56,7 @@ class NMPCState:
     working_set : after a compiled sample (:mod:`.fast`), the working set of its last
         QP (the bounds, then the rows: +1 upper, -1 lower, 0 inactive), where its next
         QP starts; else None.
-    line_cov : (16,) covariance of the lumped lines' estimate (:mod:`.lines`), else None.
+    line_cov : (nl^2,) covariance of the lumped lines' estimate (:mod:`.lines`), else None.
     """
 
     X: Any
