@@ -24,7 +24,7 @@ from ..replay import CONTROLLER_AGREEMENT  # % below which the replay is open lo
 from ..replay import controller_agreement as _controller_agreement
 from ..replay import controller_phase as _controller_phase
 from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
-from .recorded import mixed_note, with_all_signals
+from .recorded import mixed_note, unrecorded_pressure, with_all_signals
 
 __all__ = ["Prepared", "prepare", "prepare_many", "other_side", "uniform", "logger_period",
            "recorded_supply", "MIN_DURATION",
@@ -406,9 +406,8 @@ def _pressure_notes(sides: tuple[str, ...]) -> list[str]:
     elif len(sides) == 1:
         other = "p_b" if sides == ("p_a",) else "p_a"
         out.append(f"the recording has {sides[0]} but no {other}: the predictions are "
-                   f"re-anchored on the measured {sides[0]} and on {other} estimated from "
-                   "the piston's force balance (nominal mass, viscous friction and load; "
-                   "dry friction, unknown, biases it by F/A); the fit compares x and "
+                   f"re-anchored on the measured {sides[0]} and on {other} estimated (see "
+                   f"the next note); the fit compares x and "
                    f"{sides[0]}; the flow witness is formed for chamber {sides[0][-1]} "
                    "only, and the grey-box polish compares x and " f"{sides[0]}")
     return out
@@ -490,8 +489,11 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto",
     sm = _smoothed(rec, x, dt, win_x, win_p, sides, starts)
     if len(sides) == 1:
         other = "p_b" if sides == ("p_a",) else "p_a"
-        sm[f"p{other[-1]}s"] = other_side(plant, sides[0], sm[f"p{sides[0][-1]}s"],
-                                          sm["xs"], sm["v"], sm["a"])
+        rec_s = sm[f"p{sides[0][-1]}s"]
+        sm[f"p{other[-1]}s"], how = unrecorded_pressure(
+            plant, sides[0], rec_s, other_side(plant, sides[0], rec_s, sm["xs"], sm["v"], sm["a"]),
+            sm["xs"], sm["v"], np.asarray(rec["u"], dtype=float), dt, starts)
+        notes.append(how)
     if has_r and controller is not None and mode != "open":
         closed = True
         agree = _controller_agreement(plant, controller, rec, x, phase, ratio)
