@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from .data import Prepared
 
 __all__ = ["with_all_signals", "mixed_note", "chamber_estimate", "unrecorded_pressure",
-           "CHAMBER_TRUST"]
+           "CHAMBER_TRUST", "start_pressures"]
 
 #: The unrecorded pressure comes from its own chamber equation when that equation,
 #: run the same way on the recorded chamber, misses the recorded pressure by less than
@@ -115,7 +115,8 @@ def with_all_signals(prep: Prepared, parts: list[Prepared], starts: list[int]) -
     Per chamber pressure: the measurement where recorded, NaN elsewhere; its rate
     likewise; the smoothed value (the predictions' anchors and the observer's input)
     the part's own (its force-balance estimate where the part has the other side
-    only, :func:`.data.other_side`) or, in a part with no pressure, the plant's equilibrium
+    only, :func:`.data.other_side`) or, in a part with no pressure, its start pressures
+    (:func:`start_pressures`), else the plant's equilibrium
     at the part's first position (what a position-only recording alone starts from,
     :meth:`workbench.plant.Plant.initial_state`; the predictions re-anchor on it only
     at the part's start). The noise of a signal is the median over the parts that
@@ -138,6 +139,8 @@ def with_all_signals(prep: Prepared, parts: list[Prepared], starts: list[int]) -
                 mask[a:b] = True
             if p.pressures:
                 sm[a:b] = p.smoothed(side)
+            elif p.start:          # fitted to the part's start (:func:`start_pressures`)
+                sm[a:b] = p.start[side]
             else:
                 z = plant.initial_state(float(np.clip(p.xs[0], 0.0, plant.stroke)))
                 sm[a:b] = z[ia] if side == "p_a" else z[ib]
@@ -149,6 +152,37 @@ def with_all_signals(prep: Prepared, parts: list[Prepared], starts: list[int]) -
         if side not in union and any(p.pressures for p in parts):
             fields[f"p{side[-1]}s"] = np.concatenate(
                 [p.smoothed(side) if p.pressures else
+                 np.full(b - a, p.start[side]) if p.start else
                  np.full(b - a, plant.initial_state(float(np.clip(p.xs[0], 0.0, plant.stroke)))
                          [ia if side == "p_a" else ib]) for p, (a, b) in zip(parts, spans)])
     return replace(prep, **fields)
+
+
+
+
+def start_pressures(plant: Any, x0: float) -> tuple[dict[str, float], str]:
+    """Chamber pressures (Pa) at the first sample of a recording of the position only,
+    at the first position ``x0`` (m), and why, in words; ({}, "") when the plant file
+    has no leakage (its equilibrium is then the start, as before).
+
+    Not measured, so an equilibrium: the pressures the valve holds at rest at ``x0``
+    (:func:`workbench.equilibrium.operating_point`) of the plant *without its leaks*.
+    Why: with a leak to atmosphere the equilibrium of the whole plant is both chambers
+    at 1 bar (a centred valve passes nothing, the leak drains them), a state a held
+    rig reaches only after the leak's time constant with its loop off; in the loop the
+    valve's null pressure is what the chambers hold (foreign rig started at 4.4 bar, null
+    4.47 bar; x replayed at 99.9 % from there against 92.6 % from 1 bar). No fit: a
+    start level fitted to the position on the nominal plant absorbs its errors and
+    spoils the augmented replay (deadband rig: 85.7 % against 99.2 %), because while the
+    spool sits in a deadband the chambers keep their level for the whole run.
+    """
+    if not plant.params.has_effect("leakage"):
+        return {}, ""
+    from ..plant import Plant
+    sealed = Plant(plant.params.without_effect("leakage"), friction=plant.friction)
+    z = sealed.initial_state(float(np.clip(x0, 0.0, plant.stroke)))
+    out = {s: float(z[plant.state_index(s)]) for s in ("p_a", "p_b")}
+    return out, (f"the chamber pressures at the start are not recorded: they start at the "
+                 f"valve's null pressure of the plant without its leaks (p_a "
+                 f"{out['p_a'] / 1e5:.3g} bar, p_b {out['p_b'] / 1e5:.3g} bar), not at the "
+                 "plant's equilibrium, where the leaks have drained both chambers")
