@@ -33,26 +33,34 @@ CHAMBER_TRUST = 0.25
 
 def chamber_estimate(plant: Any, side: str, p0: float, x: np.ndarray, v: np.ndarray,
                      p_other: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-    """Chamber ``side``'s pressure (Pa) integrated by its own equation (the plant's mass
-    balance: valve flow at the command ``u`` (V), volume change at the smoothed position
-    ``x`` (m) and velocity ``v`` (m/s), leakage to the other chamber at ``p_other``
-    (Pa)), from ``p0`` (Pa), one linearly implicit Euler step per sample ``dt`` (s): the
-    valve's flow falls as the pressure rises, so the integration forgets its start.
-    The force balance is not used: unknown friction, load or mass do not bias it; a
-    wrong valve law or leak makes it drift. Effect states at rest (Plant.rest_state)."""
+    """Chamber ``side``'s pressure (Pa) integrated by the plant's own equations with the
+    smoothed position ``x`` (m), velocity ``v`` (m/s) and the other chamber's pressure
+    ``p_other`` (Pa) imposed at every sample: the chamber's mass balance (valve flow at
+    the command ``u`` (V), volume change, leaks) and the states effects add (lines,
+    spool, temperatures: from rest, :meth:`workbench.plant.Plant.rest_state`) run free,
+    from ``p0`` (Pa), one linearly implicit Euler step per sample ``dt`` (s; L-stable for
+    the lines' fast modes). The valve's flow falls as the pressure rises, so the
+    integration forgets its start. The force balance is not used: unknown friction,
+    load or mass do not bias it; a wrong valve law or leak makes it drift."""
     import casadi as ca
     i_s = plant.state_index(side)
     i_o = plant.state_index("p_b" if side == "p_a" else "p_a")
     ix, iv = plant.state_index("x"), plant.state_index("v")
-    p, d = ca.SX.sym("p"), ca.SX.sym("d", 4)         # d: x, v, p_other, u
-    basic = [0.0] * len(plant.state_names)
-    basic[ix], basic[iv], basic[i_o], basic[i_s] = d[0], d[1], d[2], p
-    z = plant.rest_state(ca.vertcat(*basic), d[3])
-    rate = plant.f(z, d[3], plant.p0)[i_s]
-    nxt = p + dt * rate / (1.0 - dt * ca.jacobian(rate, p))
-    step = ca.Function("chamber_step", [p, d], [nxt]).mapaccum("chamber", len(x))
-    data = np.vstack([x, v, p_other, u])
-    out = np.asarray(step(p0, data)).ravel()
+    n = len(plant.state_names)
+    free = [i for i in range(n) if i not in (ix, iv, i_o)]
+    w, d = ca.SX.sym("w", len(free)), ca.SX.sym("d", 4)      # d: x, v, p_other, u
+    z = [None] * n
+    z[ix], z[iv], z[i_o] = d[0], d[1], d[2]
+    for k, i in enumerate(free):
+        z[i] = w[k]
+    rate = plant.f(ca.vertcat(*z), d[3], plant.p0)[free]
+    jac = ca.jacobian(rate, w)
+    nxt = w + ca.solve(ca.DM.eye(len(free)) - dt * jac, dt * rate)
+    step = ca.Function("chamber_step", [w, d], [nxt]).mapaccum("chamber", len(x))
+    basic = np.zeros(n)
+    basic[ix], basic[i_s], basic[i_o] = x[0], p0, p_other[0]
+    w0 = np.asarray(plant.rest_state(basic, float(u[0]))).ravel()[free]
+    out = np.asarray(step(w0, np.vstack([x, v, p_other, u])))[free.index(i_s)]
     return np.concatenate(([p0], out[:-1]))
 
 
