@@ -24,7 +24,7 @@ from ..replay import CONTROLLER_AGREEMENT  # % below which the replay is open lo
 from ..replay import controller_agreement as _controller_agreement
 from ..replay import controller_phase as _controller_phase
 from ..signals import derivative, fit, noise_floor, odd_window, savgol, smooth
-from .recorded import mixed_note, with_all_signals
+from .recorded import mixed_note, start_pressures, unrecorded_pressure, with_all_signals
 
 __all__ = ["Prepared", "prepare", "prepare_many", "other_side", "uniform", "logger_period",
            "recorded_supply", "MIN_DURATION",
@@ -100,6 +100,7 @@ class Prepared:
     parts: list["Prepared"] = field(default_factory=list, repr=False)
     starts: list[int] = field(default_factory=list)
     recorded: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    start: dict[str, float] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -122,9 +123,11 @@ class Prepared:
 
     def first_pressures(self) -> dict[str, float]:
         """Both smoothed pressures at the first sample (Pa) when any is recorded (the
-        other one estimated, :func:`other_side`), by name; {} without pressures."""
+        other one estimated, :func:`other_side`), by name; without pressures, the
+        valve's null pressures of the plant without its leaks
+        (:func:`.recorded.start_pressures`), if it has leaks, else {}."""
         return {s: float(self.smoothed(s)[0]) for s in ("p_a", "p_b")} if self.pressures \
-            else {}
+            else dict(self.start)
 
     def measured(self, name: str) -> np.ndarray:
         """The recorded signal ``name`` (x m, p_a/p_b Pa); NaN where it was not recorded
@@ -406,12 +409,29 @@ def _pressure_notes(sides: tuple[str, ...]) -> list[str]:
     elif len(sides) == 1:
         other = "p_b" if sides == ("p_a",) else "p_a"
         out.append(f"the recording has {sides[0]} but no {other}: the predictions are "
-                   f"re-anchored on the measured {sides[0]} and on {other} estimated from "
-                   "the piston's force balance (nominal mass, viscous friction and load; "
-                   "dry friction, unknown, biases it by F/A); the fit compares x and "
+                   f"re-anchored on the measured {sides[0]} and on {other} estimated (see "
+                   f"the next note); the fit compares x and "
                    f"{sides[0]}; the flow witness is formed for chamber {sides[0][-1]} "
                    "only, and the grey-box polish compares x and " f"{sides[0]}")
     return out
+
+
+def _unrecorded(plant: Plant, sides: tuple[str, ...], sm: dict[str, Any], u: np.ndarray,
+                dt: float, starts: list[int] | None, notes: list[str]) -> dict[str, float]:
+    """The chamber pressures not recorded: with one side, the other's smoothed estimate
+    into ``sm`` (:func:`.recorded.unrecorded_pressure`); with none, the start pressures
+    returned (:func:`.recorded.start_pressures`); how, appended to ``notes``."""
+    how, start = "", {}
+    if len(sides) == 1:
+        other = "p_b" if sides == ("p_a",) else "p_a"
+        rec_s = sm[f"p{sides[0][-1]}s"]
+        sm[f"p{other[-1]}s"], how = unrecorded_pressure(
+            plant, sides[0], rec_s, other_side(plant, sides[0], rec_s, sm["xs"], sm["v"], sm["a"]),
+            sm["xs"], sm["v"], u, dt, starts)
+    elif not sides:
+        start, how = start_pressures(plant, float(sm["xs"][0]))
+    notes += [how] if how else []
+    return start
 
 
 def prepare(plant: Plant, rec: Recording, mode: str = "auto",
@@ -488,10 +508,7 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto",
                      "open-loop replay on the recorded command u, re-anchored")
     win_x, win_p = odd_window(WINDOW_X, dt), odd_window(WINDOW_P, dt)
     sm = _smoothed(rec, x, dt, win_x, win_p, sides, starts)
-    if len(sides) == 1:
-        other = "p_b" if sides == ("p_a",) else "p_a"
-        sm[f"p{other[-1]}s"] = other_side(plant, sides[0], sm[f"p{sides[0][-1]}s"],
-                                          sm["xs"], sm["v"], sm["a"])
+    start = _unrecorded(plant, sides, sm, np.asarray(rec["u"], dtype=float), dt, starts, notes)
     if has_r and controller is not None and mode != "open":
         closed = True
         agree = _controller_agreement(plant, controller, rec, x, phase, ratio)
@@ -500,7 +517,7 @@ def prepare(plant: Plant, rec: Recording, mode: str = "auto",
             notes.append(f"the plant file's [controller] does not reproduce the recorded command "
                          f"(fit of u {agree:.0f} %): it is probably not the loop that ran, so the "
                          "recording is replayed open loop on u, re-anchored")
-    return Prepared(plant=plant, rec=rec, t=t, dt=dt, closed=closed,
+    return Prepared(plant=plant, rec=rec, t=t, dt=dt, closed=closed, start=start,
                     controller=controller if closed else controller, ratio=ratio, phase=phase,
                     x=x, **sm, signals=("x",) + sides,
                     win_x=win_x, win_p=win_p, win_slow=odd_window(WINDOW_SLOW, dt, 9),
