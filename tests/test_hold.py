@@ -15,7 +15,8 @@ import pytest
 
 from workbench import Plant
 from workbench.controllers.compensation import Compensated, DeadbandInverse, held
-from workbench.controllers.hold import SEEN, SOUND_SPEED, HoldPositioner, hold_for_plant
+from workbench.controllers.hold import (FAR, SEEN, SOUND_SPEED, HoldPositioner,
+                                        hold_for_plant)
 from workbench.errors import InputError
 
 RIG = Path(__file__).resolve().parents[1] / "designs" / "plants" / "rigs" / "precision_rig25.toml"
@@ -161,10 +162,20 @@ def test_the_first_pulse_is_sized_on_the_flow_the_lines_pass():
     valve = (float(prm["valve.sonic_conductance"]) * float(prm["supply.pressure"]) * 1.185
              * math.sqrt(293.15 / float(prm["gas.temperature"])))
     h1 = hold_for_plant(plant, 0.002, Q, line_flow=0.25 * valve)
-    # a quarter of the flow: four times the opening for the same force in one width
-    assert h1.amplitude == pytest.approx(min(1.0, 4.0 * h0.amplitude), rel=1e-12)
-    assert h1.force_rate == h0.force_rate           # the force loop: the valve's rate
-    assert hold_for_plant(plant, 0.002, Q, line_flow=10 * valve).amplitude == h0.amplitude
+    # a quarter of the flow: four times the opening for the same force in one width,
+    # for a first pulse far off; near the target the first pulse stays from below
+    assert h0.far_amplitude == 0.0
+    assert h1.far_amplitude == pytest.approx(min(1.0, 4.0 * h0.amplitude), rel=1e-12)
+    assert h1.amplitude == h0.amplitude and h1.force_rate == h0.force_rate
+    assert hold_for_plant(plant, 0.002, Q, line_flow=10 * valve).far_amplitude == h0.amplitude
+    # the first pulse: far (more than FAR quanta) the stronger one, near the weaker
+    s = h1.reset()
+    assert h1._strength(s, 1.0, (FAR + 1) * Q) == h1.far_amplitude
+    assert h1._strength(s, 1.0, (FAR - 1) * Q) == h1.amplitude
+    # a direction nothing is known of, the other way moved (no no-move there): below
+    # that way's weakest move
+    s2 = {**s, "seen+": ((0.8, 3.0),), "mv+": 0.8}
+    assert h1._strength(s2, -1.0, 2 * Q) == pytest.approx(max(h1.amplitude, 0.8 * h1.shrink))
 
 
 def test_beyond_full_opening_a_pulse_gets_longer():

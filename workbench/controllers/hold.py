@@ -58,7 +58,8 @@ logic uses F_s, F_c or the mass. The width needs only the lines' length; the str
 is found on the rig, pulse by pulse, from moves the position sensor sees; the force
 loop needs only the areas and the valve's flow (its rate only sets how fast it
 unloads). The plant file's static friction sets the first pulse (the opening that
-would raise the force by F_s in one width at the flow the lines pass: a starting point).
+would raise the force by F_s in one width at the valve's flow, from below the
+break-away; more than ``FAR`` quanta off, at the flow the lines pass: a starting point).
 
 No limit cycle. In a hold the loop is closed only through discrete pulses, each sent
 on a stuck, unloaded piston and followed by the force loop until the piston is still
@@ -100,6 +101,10 @@ UNLOAD_SAMPLES = 10
 SEEN = 8
 #: The smallest moves among them whose median is the rig's typical shortest jump.
 JUMPS = 3
+#: Quanta beyond which the first pulse is the stronger ``far_amplitude``: the first
+#: pulse sized on the lines' flow moved the piston 2-3 quanta on the precision rig
+#: (10 stretched), well within twice this distance.
+FAR = 8
 #: Smallest opening the force loop commands (fraction of the span): a smaller one
 #: stays inside the residual overlap a deadband inverse leaves (its linear piece).
 MIN_OPENING = 0.01
@@ -129,6 +134,8 @@ class HoldPositioner:
     reverse : the reverse half's length as a share of the forward half's.
     max_pulses : int, pulses per hold that did not bring the piston closer (no move,
         or past the target's bin) before the hold stops trying.
+    far_amplitude : strength of the first pulse of all when the piston is more than
+        ``FAR`` quanta off (0: ``amplitude``), :meth:`_strength`.
     stroke : m, and volumes : (V_a0, V_b0) m^3, the chambers' volumes at x = 0 and
         x = stroke (dead volume and line). With them a pulse's strength and
         ``force_rate`` are taken at mid-stroke and scaled to the piston's position
@@ -155,6 +162,7 @@ class HoldPositioner:
     max_pulses: int = 10
     stroke: float = 0.0
     volumes: tuple = (0.0, 0.0)
+    far_amplitude: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("quantum", "sample_time", "dwell", "range", "lock_speed"):
@@ -167,7 +175,7 @@ class HoldPositioner:
             raise InputError(f"hold amplitude is an opening in (0, 1], got {self.amplitude!r}")
         if not (self.grow > 1.0 and 0.0 < self.shrink < 1.0):
             raise InputError("hold grow must be > 1 and shrink in (0, 1)")
-        for name in ("force_rate", "force_band", "area_a", "area_b"):
+        for name in ("force_rate", "force_band", "area_a", "area_b", "far_amplitude"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise InputError(f"hold {name} must be >= 0, got {v!r}")
@@ -388,7 +396,20 @@ class HoldPositioner:
     def _strength(self, s: dict, direction: float, e: float) -> float:
         """Strength of the next pulse towards r, ``e`` m away: :meth:`_aim`, below the
         weakest pulse that carried the piston past the target's bin (the bracket's
-        ``hi``: at or above it, the bracket's bisection, :meth:`_next`)."""
+        ``hi``: at or above it, the bracket's bisection, :meth:`_next`).
+
+        The first pulse in a direction nothing is known of (no pulse that way, no
+        threshold the other way): ``amplitude`` (from below the break-away: near the
+        target an overshoot is a failure of the step, 0.29 mm past a 10 mm step's
+        target, 2.9 %, NMPC, precision profile, with the stronger first pulse), or,
+        more than ``FAR`` quanta off, ``far_amplitude`` (sized on the lines' flow: a
+        move of up to twice the distance still lands closer, and the weak first
+        pulses cost 80 ms each: a PID or FL piston 2 mm off walked into the hold's
+        second half)."""
+        sign = "+" if direction > 0 else "-"
+        if (self.far_amplitude > 0 and abs(e) > FAR * self.quantum
+                and not s.get("seen" + sign) and self._next(s, direction) == self.amplitude):
+            return self.far_amplitude            # nothing known of this way yet, far off
         a = self._aim(s, direction, e)
         hi = s.get("hi+" if direction > 0 else "hi-", math.inf)
         return a if a is not None and a < hi else self._next(s, direction)
@@ -447,6 +468,8 @@ class HoldPositioner:
         held, moved = s.get("stay" + other, 0.0), s.get("mv" + other, math.inf)
         if held > 0 and math.isfinite(moved) and held < moved:
             return math.sqrt(held * moved)     # the other way's threshold (friction is even)
+        if math.isfinite(moved):
+            return max(self.amplitude, moved * self.shrink)   # below its weakest move
         return self.amplitude
 
     def _grown(self, a: float) -> float:
@@ -459,7 +482,8 @@ class HoldPositioner:
     def to_dict(self) -> dict:
         return {"quantum": self.quantum, "sample_time": self.sample_time, "width": self.width,
                 "amplitude": self.amplitude, "dwell": self.dwell, "range": self.range,
-                "lock_speed": self.lock_speed, "grow": self.grow, "shrink": self.shrink}
+                "lock_speed": self.lock_speed, "grow": self.grow, "shrink": self.shrink,
+                "far_amplitude": self.far_amplitude}
 
     def summary(self) -> str:
         return (f"held on the target's quantum ({self.quantum * 1e3:.4f} mm) once slow "
@@ -503,8 +527,10 @@ def hold_for_plant(plant, sample_time: float, quantum: float, pressure_noise: fl
     fs = float(prm.get("friction.static") or fc)
     # the bump's rise is limited by what the lines pass (0.45 and 0.67 opening gave the
     # same 31 N bump on the precision rig): the first pulse sized on that flow
-    lim = rate if not line_flow else rate * min(1.0, float(line_flow) / flow)
-    amp = min(1.0, max(1e-3, fs / (lim * width * T)))
+    amp = min(1.0, max(1e-3, fs / (rate * width * T)))
+    if line_flow:
+        lim = rate * min(1.0, float(line_flow) / flow)
+        kw.setdefault("far_amplitude", min(1.0, max(1e-3, fs / (lim * width * T))))
     noise = math.hypot(A, float(plant.area_b)) * float(pressure_noise)
     kw.setdefault("width", width)
     kw.setdefault("amplitude", amp)
