@@ -382,8 +382,7 @@ def design(plant, kind: str = "nmpc", spec=None, *, sample_time: float | None = 
         lock = "dry_friction" in has              # only friction holds a locked piston
     band = min(0.5 * q, 0.5 * ss_limit) if lock else 0.0
     hold = (hold_for_plant(plant, T, 2.0 * band, pressure_noise, lock_speed=LOCK_SPEED,
-                           range=hold_range(law, dead, plant if kind == "fl" else None),
-                           line_flow=_line_flow(plant))
+                           range=hold_range(law, dead, plant if kind == "fl" else None))
             if lock else None)
     margin = float(getattr(law, "stroke_margin", 0.0))
     comp = Compensated(law, deadband=dead, lock_band=band, release_band=4.0 * band,
@@ -423,17 +422,6 @@ def hold_range(law, dead, plant=None) -> float:
     zone = residual / kp if kp else 0.0
     jump = 0.0 if plant is None or getattr(law, "horizon", None) is not None else breakaway_jump(plant)
     return max(2e-3, 2.0 * zone, jump)
-
-
-def _line_flow(plant) -> float | None:
-    """kg/s the plant's lines pass from the supply into a chamber at the mid pressure
-    (:func:`line_flow`), None without lines: the hold's first pulse."""
-    prm = plant.params
-    if "line_dynamics" not in set(plant.effects):
-        return None
-    p_s, p_atm = float(prm["supply.pressure"]), float(prm["gas.atmospheric_pressure"])
-    return line_flow(float(prm["lines.length"]), float(prm["lines.diameter"]), p_s,
-                     0.5 * (p_s + p_atm), float(prm["gas.temperature"]))
 
 
 def breakaway_jump(plant) -> float:
