@@ -6,9 +6,9 @@ bores, 200-500 mm strokes, 1.5-15 kg, LuGre friction, distributed lines, 200 Hz-
 with jitter, gauge-bar and mm columns, plant files 5-8 % off): on the small rig
 (32 mm bore, 200 mm stroke, 1.5 kg: fast transients) the diagnosis named the concealed
 deadband exactly and then invented a ``parameter_error`` (mass +5 %, viscous friction
--3 %, plant file exact). The cause was the engine's 2 ms step at valve openings
-(local error up to 50-90 um, tests/test_diagnose_foreign_engine.py), which a heavier
-mass absorbed; the engine now refines those steps.
+-3 %, plant file exact). The cause was the engine's 2 ms ROS2 step at valve openings
+(local error up to 50-90 um), which a heavier mass absorbed; the engine steps with
+ROS4 now (order 4: 0.02 um there).
 """
 
 from __future__ import annotations
@@ -41,13 +41,12 @@ def _small_rig_recording(plant_file, overrides, duration=8.0, seed=3):
     return Recording.from_arrays(t, metadata={"sample_time": 1e-3}, **cols)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12 open: the engine's step refinement is decided "
-                   "once per predictor now (predict.settle_refinement) but is off by default "
-                   "(predict.REFINE_STEPS: on, it named spurious effects on the bench case)")
 def test_small_rig_deadband_without_invented_nominal_errors(tmp_path):
     """Deadband 0.06 concealed, plant file exact: the deadband is named within 2 % and
-    no parameter_error is (on main's engine: deadband 0.0600 and a parameter_error of
-    mass 1.575 kg, +5 %, which fit the engine's error at valve openings). Candidates
+    no parameter_error is (with ROS2 at one 2 ms step per sample: deadband 0.0600 and a
+    parameter_error of mass 1.575 kg, +5 %, which fit the step's error at valve
+    openings; with the engine's ROS4 the plain step is within 0.02 um of Radau at such
+    an opening, tests/test_diagnose_rig_engine.py). Candidates
     restricted to the two that competed, 8 s of recording, to keep the test short."""
     from workbench.diagnose import diagnose
     plant_file = tmp_path / "small.toml"

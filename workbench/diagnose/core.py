@@ -163,6 +163,10 @@ def _diagnose(plant, recording, effects, workers, mode, verbose, jit, max_nfev, 
     chosen, sets_info = search(refits, cands, ranking, max_nfev, nothing,
                                lambda: budget_s is not None and clock.elapsed() > budget_s)
     clock.tick(f"sets of explanations ({sets_info['candidate_models']} candidate models)")
+    # a chosen candidate refitted by the set search (from a pair's values) is reported
+    # with that fit: the ranking (details.json) lists the values the findings carry
+    refitted = {r.name: r for r in chosen.ranked}
+    ranking = [refitted.get(r.name, r) for r in ranking]
     polished: dict[str, Any] = {}
     if polish_values and chosen.ranked:
         polished = _polish_findings(prep, params, chosen.ranked, by_name, nom.err)

@@ -16,12 +16,19 @@ samples that can be **re-anchored** on the measurement wherever asked:
   measured ones; it also returns the model's rates f(z, u) along the measurement,
   from which the equation errors of :mod:`.witness` are formed.
 
-Integration: the 2-stage Rosenbrock method ROS2 (Verwer et al. 1999), L-stable,
-one step per recorded sample (or ``substeps``), by :func:`workbench.integrate.rosenbrock`
-with :data:`workbench.integrate.ROS2`. ROS2 keeps its order 2 for any
-approximation W of the Jacobian, which is used here: positive diagonal entries of
-the Jacobian (the negative damping of a Stribeck friction curve) are left out of W
-so that a falling friction curve cannot make the linear solve singular.
+Integration: the 4-stage Rosenbrock method ROS4 of Hairer & Wanner (order 4,
+L-stable; :data:`TABLEAU`) by :func:`workbench.integrate.rosenbrock`, with the
+unpivoted sparse LU of :mod:`workbench.integrate.linalg` written out in SX, at
+one step per sample. A plant with line dynamics or a spool lag is stepped by ROS2
+(Verwer et al. 1999, order 2) at one step per sample, as every plant was until
+session 10 (why: :data:`LINE_TABLEAU`; :func:`stiff_substeps` sizes ROS4's steps
+for those, measured but not used by default). ROS2's error was the replay
+floor the diagnosis' extra effects absorbed (67 um rms in x for the exact model of
+the 25 mm rig; :data:`TABLEAU` for the figures now). Positive diagonal entries of the
+Jacobian (the negative damping of a Stribeck friction curve) are left out of the
+matrix W of the step so that a falling friction curve cannot make the linear solve
+singular; ROS4 is not a W-method, so such a step is of lower order (the friction
+events, where :data:`EXPLICIT_LIMIT` flags it).
 
 Step refinement: a sample whose input row ``refine`` is 1 is stepped with
 :data:`REFINE` times smaller steps. The caller decides those samples once per
@@ -37,7 +44,7 @@ function (reset +
 controller + step) is accumulated over a chunk of
 samples (``mapaccum``) and compiled to C once per plant structure and controller
 (:func:`workbench.integrate.jit.compiled`, cached by source hash); Python loops over the
-chunks. One replay of 24 s at 1 kHz of the 4-state plant takes about 0.1 s.
+chunks. One replay of 24 s at 1 kHz of the 4-state plant takes about 0.02 CPU s.
 
 :meth:`Engine.run_sensitivity` also carries the exact forward sensitivities of the
 replay with respect to chosen directions in parameter space (CasADi's forward mode
@@ -47,6 +54,7 @@ through the steps, the re-anchoring and the controller), compiled on first use.
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -54,12 +62,12 @@ import casadi as ca
 import numpy as np
 
 from ..controllers.pd import clip_and_quantise, pid_law
-from ..integrate import ROS2, rosenbrock
+from ..integrate import ROS2, ROS4, rosenbrock
 from ..integrate.jit import compiled
 from ..physics.friction import stribeck_level
 from ..plant import Plant
 
-__all__ = ["Engine", "EngineInputs", "OUTPUTS", "INPUT_ROWS"]
+__all__ = ["Engine", "EngineInputs", "OUTPUTS", "INPUT_ROWS", "stiff_substeps"]
 
 #: Rows of the engine's output, per sample: simulated x, p_a, p_b (at the sample,
 #: after any re-anchoring), command used, and (``rates``) the model rates dv/dt,
@@ -73,9 +81,6 @@ INPUT_ROWS = ("r", "u_rec", "control_instant", "closed_loop", "anchor", "anchor_
               "refine")
 # use_p_s, p_s_m: where use_p_s is 1 the supply pressure is the recorded p_s_m (Pa);
 # refine: 1 where the sample's step is taken with REFINE times smaller steps
-
-#: More states than this: numeric linear solves (a symbolic inverse grows too big).
-_SX_LIMIT = 16
 
 #: Samples per compiled chunk.
 CHUNK = 1000
@@ -93,32 +98,60 @@ REFINE = 8
 #: break-away moved the piston 67 um less than the converged solution). A step over
 #: the limit is redone with :data:`REFINE` times smaller steps.
 EXPLICIT_LIMIT = 0.4
-#: |C3| of ROS2's local error C3 h^3 J^2 f (:func:`_error_too_large`).
+#: The Rosenbrock method of the engine's steps for a plant without lines or a spool lag
+#: (those: :data:`LINE_TABLEAU`): ROS4 (Hairer & Wanner, the L-stable choice), order 4, four stages, three evaluations of f, one Jacobian and one LU per
+#: step. Measured against CVODES from the true state over 0.2 s windows, 2 ms steps
+#: (tests/test_diagnose_rig_engine.py, tests/test_diagnose_lines_replay.py): the
+#: 25 mm rig without friction, noise-free recording, 67 um rms (ROS2, order 2, one step
+#: per sample; 5.8 um at four) -> 5.4 um; with stick-slip (20 / 28 N, v_s 12 mm/s)
+#: 162 -> 23 um; the candidate's 3-segment lines of 3.62 m 50 -> 1.2 um. With the sparse
+#: LU (:mod:`workbench.integrate.linalg`) a step of the 4-state plant costs what a ROS2
+#: step with a dense symbolic solve did (24 s replay: 0.022 CPU s either), of the
+#: 16-state line structure less (0.047 against 0.072 s); a 64-state plant (15-segment
+#: lines) is now SX with that LU too, not MX with a dense QR (0.15 against 0.50 CPU s
+#: for 6 s of replay).
+TABLEAU = ROS4
+#: The method for a plant with line dynamics: ROS2 (Verwer et al. 1999, order 2,
+#: L-stable, a W-method) at the given steps per sample, as until session 10. ROS4 with
+#: :func:`stiff_substeps` replays the diagnosis's 3-segment lines within 1.2 um of
+#: CVODES (3.62 m, 3.6 mm; ROS2: 50 um rms) but made the chain's own form show: on the
+#: foreign rig's one-section lumped line (tests/test_diagnose_lines.py) the pair lines +
+#: spool lag then fitted worse (137 against 115 noise units), the lag made the
+#: pressures worse than the lines alone and a 228 Hz valve lag alone was named instead
+#: of the lines; ROS2 at 2 ms damps the chain's upper modes (|R| <= 0.39 at h omega >= 2),
+#: which are artifacts of lumping a distributed line into 3 segments. Nor did it change
+#: the --sets rows offset + lines (named right, a valve lag said beside it) or lines +
+#: supply droop (droop only said): what is left there is the 3 segments' form against
+#: the recording's 15 (x 112 um, p 267 Pa rms in 0.2 s windows; 6 segments 42 um,
+#: 104 Pa). So ROS2 for lines until the line candidate's form is finer. The same for a
+#: plant with a spool lag (valve_dynamics), for a reason of its own: the fits move the
+#: spool's bandwidth up to 400 Hz (the candidate's neutral value, no lag), where one
+#: ROS4 step per 2 ms sample (h omega ~5) keeps the spool's mode weakly damped in a
+#: wrong phase (|R(iy)| 0.52 at y = 4) while ROS2 damps it to the quasi-static limit
+#: (0.20) that a fast spool is; the step count is fixed per engine from the start
+#: values (:func:`stiff_substeps`), so it cannot follow. Measured on the single-effect
+#: bench case (concealed dry friction): with ROS4 for the spool, the pair dry friction
+#: + a 222 Hz spool lag cut the short-horizon cost by 37 % (17.4 against 27.7 noise
+#: units; with ROS2 it raised it: 35.9 against 30.1), the set search then explored 40
+#: candidate models instead of 27 and took 61 CPU s instead of 23.
+LINE_TABLEAU = ROS2
+#: |C3| of ROS2's local error C3 h^3 J^2 f (the ``inexact`` flag of a ROS2 step).
 ROS2_C3 = 1.0 / 6.0 - (4.0 * (1.0 + 0.5 ** 0.5) ** 3 - (1.0 + 2.0 ** 0.5) * 3.0
                        * (1.0 + 0.5 ** 0.5) ** 2)
+#: Largest h x |lambda| of the fastest mode of the linearised plant (:func:`stiff_substeps`)
+#: a step may take. ROS4's one-step error on an oscillatory mode e^(i y), |R(iy) - e^(iy)|,
+#: is 1.6e-2 at y = 1, 7.3e-2 at 1.5 and 0.18 at 2, and its damping |R(iy)| still 0.84 at
+#: 2 and 0.52 at 4: a mode stepped at y of 2-10 keeps a wrong phase instead of being
+#: damped away (a 15-segment 3.62 m line: 0.47 mm rms at one step per 2 ms sample, y =
+#: 7.3). Measured x rms against CVODES (lines of 0.3-3.62 m, 3-15 segments, from the true
+#: state): <= 2.5 um wherever y <= 1.4; 3.5-10 um at y = 2.0-2.7; 25-200 um at 3.6-5.4.
+STIFF_LIMIT = 1.5
 #: Local error a step may leave in the position (fraction of the stroke) and in the
 #: chamber pressures (fraction of the supply pressure) before it is redone with
 #: :data:`REFINE` sub-steps: 1e-5 of the stroke is below the least significant bit of
 #: a 16-bit position sensor over the stroke (1.5e-5), 1e-4 of a 6 bar supply (60 Pa) a
 #: quarter of a 12-bit pressure sensor's over 0-10 bar (244 Pa).
 LOCAL_TOL = (1e-5, 1e-4)
-#: ROS2 steps per sample are multiplied by this for a plant with line dynamics. The
-#: lumped line's segment modes are far faster than a 2 ms step: in a 0.2 s window
-#: that starts a reference step, from the true state, the candidate structure (3
-#: segments per line) missed CVODES by 0.61 mm rms at one step per sample (3 m of 4 mm
-#: tubing; 0.16 mm for 4 m of 3 mm), 0.17 / 0.04 mm at two and 0.037 / 0.030 mm at four
-#: (tests/test_diagnose_lines_replay.py): the replay mismatch that the set search
-#: explained with a spurious ~40 Hz valve lag (offset + lines). Four steps cost: a 24 s
-#: replay of that structure 0.23 CPU s instead of 0.072, and the single-effect bench
-#: (``workbench bench diagnose``) 32.9 CPU s instead of 24.2-24.9 (loaded machine),
-#: which would take its wall time past its 15 s target; tests/test_diagnose_lines.py and
-#: the line case of tests/test_diagnose.py pass with either. With four, the set case
-#: valve_offset + line_dynamics of designs/diagnose_concealed.py (--sets, seed 2026) still
-#: named a spurious valve lag (66 Hz; length 2.70 m vs 3.62): the rest of its mismatch
-#: is the line model's 3 segments against the recording's 15 (0.20 against 0.11 mm rms
-#: for 3 m of 4 mm tubing) and the hidden states started at rest in the first window.
-#: So one step (no change) until a fix of those shows a gain worth the time.
-LINE_SUBSTEPS = 1
 #: Physical bounds of any pressure state: above P_FLOOR x atmospheric, below
 #: P_CEIL x supply pressure.
 P_FLOOR = 0.02
@@ -138,9 +171,9 @@ class EngineInputs:
         return EngineInputs(d)
 
 
-def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step"
-               ) -> ca.Function:
-    """(z_{k+1}, inexact) = ROS2(z_k, u, p): one step of h/substeps (:func:`_repeated`
+def _one_step(plant: Plant, h: float, substeps: int = 1, name: str = "engine_step",
+              tableau=TABLEAU) -> ca.Function:
+    """(z_{k+1}, inexact): one :data:`TABLEAU` step of h/substeps (:func:`_repeated`
     chains them); ``inexact`` is 1 where the step cannot be accurate
     (:data:`EXPLICIT_LIMIT`, and the friction events below), so that
     :func:`_guarded_step` redoes it with smaller steps.
@@ -159,11 +192,9 @@ def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step
     of the friction law inside the step, where a one-step method loses its order.
     """
     nx = len(plant.states)
-    sx = nx <= _SX_LIMIT
-    Sym = ca.SX if sx else ca.MX
-    z = Sym.sym("z", nx)
-    u = Sym.sym("u")
-    p = Sym.sym("p", len(plant.p0))
+    z = ca.SX.sym("z", nx)
+    u = ca.SX.sym("u")
+    p = ca.SX.sym("p", len(plant.p0))
     dt = h / substeps
     fric = plant.params.has_effect("dry_friction")
     if fric:
@@ -202,13 +233,18 @@ def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step
     fz = f_of(zk)
     J = ca.jacobian(fz, zk)
     growth = ca.mmax(ca.diag(J))         # 1/s: fastest growing mode, left explicit in W
-    inexact = ca.logic_or(growth * dt > EXPLICIT_LIMIT,
-                          _error_too_large(plant, J, fz, dt))
     J = J - ca.diag(ca.fmax(ca.diag(J), 0.0))
-
-    def solve(M, rhs):
-        return ca.solve(M, rhs) if sx else ca.solve(M, rhs, "qr")
-    zn = rosenbrock(ROS2, f_of, zk, dt, fx=fz, jacobian=J, solve=solve)
+    # the default solve: the unpivoted LU of I/(h gamma) - W written out in SX, which
+    # skips structural zeros (the line chains are banded). Its diagonal is at least
+    # 1/(h gamma) (W's is <= 0), and the plant's couplings come in pairs of opposite
+    # sign (x' = v against the pressure force, a node's pressure against its segment
+    # flow), which add to the pivots rather than take from them
+    if tableau.e:
+        zn, err = rosenbrock(tableau, f_of, zk, dt, fx=fz, jacobian=J, error=True)
+    else:                  # ROS2: its leading local error C3 h^3 J^2 f
+        zn = rosenbrock(tableau, f_of, zk, dt, fx=fz, jacobian=J)
+        err = ca.mtimes(J, ca.mtimes(J, fz)) * (ROS2_C3 * dt ** 3)
+    inexact = ca.logic_or(growth * dt > EXPLICIT_LIMIT, _error_too_large(plant, err))
     if fric:
         v1 = zn[iv]
         den = v0 - v1
@@ -225,25 +261,20 @@ def _ros2_step(plant: Plant, h: float, substeps: int = 1, name: str = "ros2_step
     return ca.Function(name, [z, u, p], [zn, inexact])
 
 
-def _error_too_large(plant: Plant, J, fz, dt: float):
-    """1 where the step's leading local error in x, p_a or p_b exceeds :data:`LOCAL_TOL`.
+def _error_too_large(plant: Plant, err):
+    """1 where the step's local error estimate in x, p_a or p_b exceeds :data:`LOCAL_TOL`.
 
-    ROS2's local error is C3 h^3 J^2 f + O(h^4) on the linear part of the dynamics
-    (its stability function R(z) = (1 - (2 gamma - 1) z) / (1 - gamma z)^2 has the z^3
-    coefficient -1.207 where e^z has 1/6: C3 = -1.374); the position's is all of it,
-    since x' = v is linear (its h^3 term is the jerk, (J f)_v). The jerk is large where
-    the valve opens on the chambers (pressure rates of 1e7 Pa/s at a command step):
-    one 2 ms step then moves the piston 52 um backwards relative to the converged
-    solution (estimated 86 um), against 1.1 um with eight sub-steps.
+    ``err`` is the tableau's embedded estimate (ROS4's order-4 solution minus its
+    order-3 one: a bound on the local error of the order-3 solution, so of the step's
+    own error with room to spare), or ROS2's leading term C3 h^3 J^2 f.
     """
     prm = plant.params
     tol = {"x": LOCAL_TOL[0] * plant.stroke,
            "p_a": LOCAL_TOL[1] * prm["supply.pressure"],
            "p_b": LOCAL_TOL[1] * prm["supply.pressure"]}
-    e = ca.mtimes(J, ca.mtimes(J, fz)) * (ROS2_C3 * dt ** 3)
-    bad = ca.MX(0) if isinstance(fz, ca.MX) else ca.SX(0)
+    bad = ca.MX(0) if isinstance(err, ca.MX) else ca.SX(0)
     for name, t in tol.items():
-        bad = ca.logic_or(bad, ca.fabs(e[plant.state_index(name)]) > t)
+        bad = ca.logic_or(bad, ca.fabs(err[plant.state_index(name)]) > t)
     return bad
 
 
@@ -287,8 +318,8 @@ def _project(plant: Plant, z):
                         for i in range(z.shape[0])])
 
 
-def _guarded_step(plant: Plant, h: float, substeps: int) -> ca.Function:
-    """(z_{k+1}, inexact) over one sample, given ``refine`` (0 or 1): ``substeps`` ROS2
+def _guarded_step(plant: Plant, h: float, substeps: int, tableau=TABLEAU) -> ca.Function:
+    """(z_{k+1}, inexact) over one sample, given ``refine`` (0 or 1): ``substeps`` :data:`TABLEAU`
     steps, or :data:`REFINE` times as many where ``refine`` is 1 (evaluated only then).
 
     Where the step leaves the physically possible states (:func:`_implausible`: at an
@@ -299,15 +330,15 @@ def _guarded_step(plant: Plant, h: float, substeps: int) -> ca.Function:
 
     ``inexact`` is 1 where the plain step says it cannot be accurate (a friction event
     inside it, a growing mode too fast for its explicit treatment, a leading local
-    error above :data:`LOCAL_TOL`: :func:`_ros2_step`). It does **not** decide the
+    error above :data:`LOCAL_TOL`: :func:`_one_step`). It does **not** decide the
     refinement of this replay: the caller decides ``refine`` for every sample once
     (:func:`.predict.settle_refinement`), so that within a fit the replay is a smooth
     function of the parameters (a decision taken sample by sample from the parameters'
     own replay switches steps between 1 and 8 sub-steps as the parameters move, and the
     cost jumps: the refits then fitted the static friction 7.7 % low)."""
     nx, npar = len(plant.states), len(plant.p0)
-    coarse_one = _ros2_step(plant, h, substeps, "ros2_coarse")
-    fine_one = _ros2_step(plant, h, substeps * REFINE, "ros2_fine")
+    coarse_one = _one_step(plant, h, substeps, "step_coarse", tableau)
+    fine_one = _one_step(plant, h, substeps * REFINE, "step_fine", tableau)
     coarse = coarse_one if substeps == 1 else _repeated(coarse_one, substeps, nx, npar)
     fine = _repeated(fine_one, substeps * REFINE, nx, npar)
     zm, um, pm = ca.MX.sym("z", nx), ca.MX.sym("u"), ca.MX.sym("p", npar)
@@ -317,7 +348,48 @@ def _guarded_step(plant: Plant, h: float, substeps: int) -> ca.Function:
     bad = _implausible(plant, zm, zc)
     zn = ca.if_else(ca.logic_or(refine, bad), ca.if_else(bad, _project(plant, zf), zf, True),
                     zc, True)
-    return ca.Function("ros2", [zm, um, pm, refine], [zn, inexact])
+    return ca.Function("engine_sample", [zm, um, pm, refine], [zn, inexact])
+
+
+def stiff_substeps(plant: Plant, h: float) -> int:
+    """Steps per engine sample of ``h`` s so that h/n x |lambda| <= :data:`STIFF_LIMIT`
+    for the fastest mode lambda of the plant's lines and spool.
+
+    |lambda| is the spectral radius of the line and spool states' own block of df/dz
+    (the chambers and the piston held) at mid-stroke with the chambers at rest, the
+    valve closed or fully open either way: the fastest acoustic mode of a segment
+    (about 2 a / segment length, a the speed of sound), the filling of a line's first
+    node through the open valve (its volume against the valve's conductance), a spool's
+    bandwidth. These are the oscillatory and valve-driven modes a step must resolve
+    (a step at h |lambda| of 2-10 keeps their phase wrong rather than damping them:
+    :data:`STIFF_LIMIT`); the chambers' own stiff modes (a leak's steep slope at equal
+    pressures, a chamber at its dead volume) are real and damped, which the L-stable
+    step handles at one step per sample. The rates are the plant's values, not the
+    recording's: the count is fixed for an engine, so every replay of a fit is stepped
+    alike (a fit that moves far from its start, e.g. to a much shorter line, is stepped
+    as its start was). Measured: 1 for the plant without lines or with 3.62 m of
+    3.6 mm tubing in the diagnosis's 3 segments (550 1/s), 3 for 1 m in 3 segments
+    (1990 1/s), 5-8 for the plant files' default of a segment per 0.25 m.
+
+    Parameters
+    ----------
+    plant : the plant (its parameter values set the rates).
+    h : engine sample period, s.
+    """
+    idx = [i for i, sig in enumerate(plant.states) if sig.part in ("line", "valve")]
+    if not idx:
+        return 1
+    nx = len(plant.states)
+    z, u = ca.MX.sym("z", nx), ca.MX.sym("u")
+    jac = ca.Function("stiff_jacobian", [z, u], [ca.jacobian(plant.f(z, u, plant.p0), z)])
+    prm = plant.params
+    z0 = plant.initial_state(0.5 * plant.stroke)
+    rho = 0.0
+    for cmd in (prm["valve.command_min"], prm["valve.command_center"], prm["valve.command_max"]):
+        J = np.asarray(jac(z0, cmd), dtype=float)[np.ix_(idx, idx)]
+        if np.all(np.isfinite(J)):
+            rho = max(rho, float(np.max(np.abs(np.linalg.eigvals(J)))))
+    return max(int(math.ceil(h * rho / STIFF_LIMIT - 1e-9)), 1)
 
 
 def _hidden_rest(plant: Plant, z, u_prev, p):
@@ -334,25 +406,32 @@ class Engine:
     ----------
     plant : Plant
         Structure (effects, states); parameter values are passed to :meth:`run`.
-    sample_time : recording period, s (one ROS2 step per sample by default).
+    sample_time : engine sample period, s.
     controller : the plant file's PID (closed loop), or None (open loop only).
-    substeps : ROS2 steps per sample (times :data:`LINE_SUBSTEPS` for a plant with line
-        dynamics).
+    substeps : least number of steps per sample; with ROS4, more when the plant's
+        fastest mode asks for them (:func:`stiff_substeps`: long lines, a fast spool).
+    tableau : the Rosenbrock method (default :data:`TABLEAU`, :data:`LINE_TABLEAU` for
+        a plant with line dynamics or a spool lag).
     jit : compile to C when a compiler is present.
     rates : also return the model's rates (observer passes).
     """
 
     def __init__(self, plant: Plant, sample_time: float, controller=None, substeps: int = 1,
-                 jit: bool = True, chunk: int = CHUNK, rates: bool = False) -> None:
+                 jit: bool = True, chunk: int = CHUNK, rates: bool = False,
+                 tableau=None) -> None:
         self.plant = plant
         self.h = float(sample_time)
         self.controller = controller
         self.chunk = int(chunk)
         nx = len(plant.states)
         npar = len(plant.p0)
-        if any(sig.part == "line" for sig in plant.states):
-            substeps *= LINE_SUBSTEPS
-        step = _guarded_step(plant, self.h, substeps)
+        if tableau is None:
+            fast = any(sig.part in ("line", "valve") for sig in plant.states)
+            tableau = LINE_TABLEAU if fast else TABLEAU
+        if tableau.e:            # a method that resolves the modes it steps: size its steps
+            substeps = max(int(substeps), stiff_substeps(plant, self.h))
+        self.substeps, self.tableau = int(substeps), tableau
+        step = _guarded_step(plant, self.h, substeps, tableau)
         zs = ca.MX.sym("z", nx)
         cs = ca.MX.sym("c", 3)          # previous error, integral, held command
         inp = ca.MX.sym("in", len(INPUT_ROWS))
@@ -402,7 +481,7 @@ class Engine:
         self.rows = (OUTPUTS if rates else OUTPUTS[:4]) + ("inexact",)
         self._sym = (zs, cs, inp, ps, zn, ca.vertcat(e_prev, integ, u_held), ca.vertcat(*outs))
         self._tag = hashlib.sha1(repr((
-            plant.state_names, plant.param_names, self.h, substeps, self.chunk, rates,
+            plant.state_names, plant.param_names, self.h, substeps, tableau.name, self.chunk, rates,
             plant.friction, None if controller is None else
             (controller.kp, controller.kd, controller.ki, controller.sample_time,
              controller.u_center, lo, hi, prm.get("controller.position_resolution"),
@@ -415,7 +494,7 @@ class Engine:
         """The per-sample function accumulated over a chunk, compiled; with ``k`` > 0 it
         also carries the forward sensitivities of the state, the controller memory and
         the outputs x, p_a, p_b along ``k`` directions in parameter space (seed ``D``,
-        npar x k): exact derivatives of the discrete replay (ROS2 steps, re-anchoring,
+        npar x k): exact derivatives of the discrete replay (the steps, re-anchoring,
         controller), by CasADi's forward mode."""
         zs, cs, inp, ps, zn, cn, y = self._sym
         nx, npar, n = zs.shape[0], ps.shape[0], self.chunk
