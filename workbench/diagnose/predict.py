@@ -330,8 +330,11 @@ def segments(prep: Prepared, length: float = SEGMENT, decimate: int = 2,
 #: noise-free 4 s stick-slip recording (Coulomb 20 N, static 28 N, v_s 12 mm/s) the
 #: exact model's replay misses x by 22.7 um rms unrefined, 7.3 um with the events
 #: refined (4.5 % of the samples), 5.5 um with every sample refined; with the sensor
-#: noise of synth (20 um, 12 bits) 48 / 42 / 42 um. Not yet checked on the bench and the
-#: --sets table with ROS4, so still off.
+#: noise of synth (20 um, 12 bits) 48 / 42 / 42 um. Switched on with ROS4 (loaded
+#: machine): the single-effect bench case named dry friction alone, 27 candidate
+#: models, 25.1 CPU s against 23.3 off; but tests/test_diagnose.py's foreign dry-friction
+#: case (tanh-smoothed law) named a negligible leak (4.9e-12 kg/(s Pa)) beside the
+#: friction. So still off.
 REFINE_STEPS = False
 
 #: Engine steps on each side of a friction event of the recording (or of a step the
