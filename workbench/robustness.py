@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 import numpy as np
 
 from .errors import InputError
-from .output import reraise_interrupt, stop_on_signals
+from .output import reraise_interrupt, stop_on_signals, stop_workers
 
 if TYPE_CHECKING:                   # imported lazily: `workbench --help` stays fast
     from .plant import Plant
@@ -311,13 +311,7 @@ def _run_jobs(jobs: list[tuple[int, str]], nproc: int, results: dict, bar) -> No
             results[futs[f]] = f.result()
             bar.update()
     except BaseException:
-        procs = list((getattr(ex, "_processes", None) or {}).values())
-        ex.shutdown(wait=False, cancel_futures=True)
-        for proc in procs:
-            if proc.is_alive():
-                proc.terminate()
-        for proc in procs:
-            proc.join(timeout=5)
+        stop_workers(ex)                   # a signal or an error: no waiting for the jobs
         raise
     ex.shutdown(wait=True)
 

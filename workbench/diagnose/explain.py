@@ -38,6 +38,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from ..output import stop_workers
 from ..params import PlantParams
 from .candidates import Candidate
 from .data import Prepared
@@ -84,26 +85,6 @@ def _work(i: int) -> FitResult:
                          plant_values={}, error=f"{type(exc).__name__}: {exc}")
 
 
-def _stop_workers(ex: ProcessPoolExecutor) -> None:
-    """End the refits of ``ex`` now: queued ones cancelled, running ones killed.
-
-    A SIGTERM sent to the main process alone (a service manager, ``kill PID``) reaches
-    the main process only; leaving the ``with`` block of the executor would then wait
-    for every running refit to end (8-17 s measured in session 9, minutes at load 20)
-    before the exit. The workers hold nothing to clean up (their results come back
-    through the executor's queue, they write no file but the JIT cache, which is
-    compiled in a temporary folder and renamed into place), so SIGKILL is safe and,
-    unlike SIGTERM, cannot be delayed by a long call in compiled code. ``_processes``
-    is the executor's own table of its workers (CPython; empty if it changes)."""
-    procs = list((getattr(ex, "_processes", None) or {}).values())
-    ex.shutdown(wait=False, cancel_futures=True)
-    for proc in procs:
-        if proc.is_alive():
-            proc.kill()
-    for proc in procs:
-        proc.join(timeout=5.0)
-
-
 def refit_all(prep: Prepared, params: PlantParams, cands: Sequence[Candidate], shpe: Predictor,
               seg: Predictor | None, workers: int | None = None, max_nfev: int = 8,
               jit: bool = True, base: Mapping[str, float] | None = None,
@@ -128,7 +109,7 @@ def refit_all(prep: Prepared, params: PlantParams, cands: Sequence[Candidate], s
                 for i, f in futs.items():
                     results[i] = f.result()
             except BaseException:
-                _stop_workers(ex)     # a signal (or an error): no waiting for the refits
+                stop_workers(ex)      # a signal (or an error): no waiting for the refits
                 raise
             ex.shutdown(wait=True)
         else:
