@@ -135,3 +135,66 @@ def test_lumped_lines_keep_the_command_activity_on_the_sine_bounded(lined):
     # and it still tracks: every step's steady state within one quantum
     steps = [h for h in lined.holds if h["segment"].startswith("step")]
     assert max(h["steady_state_error"] for h in steps) <= lined.quantum
+
+
+def test_compiled_line_filter_estimates_as_the_python_filter(plant, monkeypatch):
+    # two segments per line (12 states): the compiled sample runs the line filter in C
+    # within its one call per sample; each sample's line estimate and covariance must
+    # be what the Python filter (Problem.measured_state: the same CasADi expression,
+    # evaluated by CasADi) makes from the compiled sample's previous memory and the
+    # same measurement, rounding apart
+    from workbench.controllers.mpc import model
+    monkeypatch.setattr(model, "LUMPED_SEGMENTS", 2)
+    rig = _filter_plant(plant, 2)
+    fast = NMPC.for_plant(rig, jit=True, lines="lumped", horizon=4)
+    if fast.compiled_reason is not None:
+        pytest.skip(fast.compiled_reason)
+    pb = fast._problem
+    assert pb.nx == 12
+    T = fast.sample_time
+    n = 30
+    u = np.repeat(5.0 + 1.0 * np.random.default_rng(2).uniform(-1, 1, n // 5), 5)
+    tr = simulate.open_loop(rig, T * np.arange(n), u, x0=rig.initial_state(0.25),
+                            rtol=1e-9, atol=1e-12, progress=False)
+    X = np.asarray(tr.states)
+    i_q = [4 + i for i, s in enumerate(model.line_states(2)) if s[7] == "q"]
+    slow = NMPC.for_plant(rig, jit=False, compiled_sample=False, lines="lumped", horizon=4)
+    state, other, moved = None, None, 0.0
+    for k in range(n):
+        y = dict(zip(NMPC_STATES, X[k, :4]))
+        z, cov = pb.measured_state(X[k, :4] / pb.sx[:4], state)
+        state, u_fast = fast.update(state, 0.251, y)
+        # and the Python update (its filter and SQP) on the same measurements
+        other, u_slow = slow.update(other, 0.251, y)
+        assert other.info.success == state.info.success
+        assert abs(u_fast - u_slow) < 1e-6                               # V
+        np.testing.assert_allclose(state.z, z, rtol=0, atol=1e-9)        # scaled
+        np.testing.assert_allclose(state.line_cov, cov, rtol=1e-7, atol=1e-14)
+        moved = max(moved, float(np.max(np.abs(state.z[i_q]))))
+    # the estimated flows left the lines' rest (zero flow) state: > 1 g/s (scaled by
+    # Q_SCALE = 10 g/s), so the two agree on a working estimate, not on the start
+    assert moved > 0.1, moved
+
+
+def test_python_update_fails_a_step_with_nan_as_the_compiled_sample(plant, monkeypatch):
+    # commands that are not the NMPC's own drive the rig (open loop) away from its
+    # plans: from some samples on the SQP's iterates leave the model's domain and the
+    # QP gets NaN. CasADi's QP plugin raises on that; the Python update must fail the
+    # step (success False, the fallbacks: the previous plan) as the compiled sample
+    # does, not stop the loop with CasADi's error
+    from workbench.controllers.mpc import model
+    monkeypatch.setattr(model, "LUMPED_SEGMENTS", 2)
+    rig = _filter_plant(plant, 2)
+    slow = NMPC.for_plant(rig, jit=False, compiled_sample=False, lines="lumped", horizon=10)
+    T = slow.sample_time
+    n = 30
+    u = np.repeat(5.0 + 1.0 * np.random.default_rng(2).uniform(-1, 1, n // 5), 5)
+    tr = simulate.open_loop(rig, T * np.arange(n), u, x0=rig.initial_state(0.25),
+                            rtol=1e-9, atol=1e-12, progress=False)
+    X = np.asarray(tr.states)
+    state, ok = None, []
+    for k in range(n):
+        state, cmd = slow.update(state, 0.26, dict(zip(NMPC_STATES, X[k, :4])))
+        ok.append(state.info.success)
+        assert np.isfinite(cmd)
+    assert any(ok) and not all(ok)        # measured: 24 of 30 samples failed (h14m)

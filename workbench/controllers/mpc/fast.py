@@ -14,6 +14,10 @@ between the nodes), and the QP, by DAQP's own C library (the
 static ``libdaqpstat.a`` shipped with CasADi, linked in) on the rows that may be
 active: the previous sample's working set, and the rows its solution violates (the
 same optimum as on all rows; see :mod:`.fast_c`).
+With lumped lines (:mod:`.lines`) the line states' Kalman step is generated as C
+too and called by the driver at the start of the sample (its covariance kept in the
+memory): one C call per sample for the filter and the SQP (with the filter a separate
+CasADi call from Python, two segments per line took 1.03 ms CPU per sample).
 Python does per sample: four numbers into a preallocated buffer, one ctypes call,
 the command returned as a float; no array or memory object is made after the first
 sample.
@@ -48,6 +52,7 @@ from ...integrate.jit import (MINMAX, CompileError, cache_dir, have_compiler,
 from .model import NMPC_STATES, V_SCALE
 from .nodes import admissible, node_reference
 from .fast_c import DRIVER, config
+from .lines import line_filter, line_start
 from .qp import SQP_CONTRACTION, SQP_DAMPING, apply_step, daqp_primal_tol, intervals
 from .results import StepInfo
 
@@ -97,6 +102,8 @@ def _source(pb) -> str:
     nz, nc = pb.N + pb.ns, pb.n_rows
     funs = [intervals(pb), apply_step(pb)]
     _check_layout(pb, *funs)
+    if pb.lines:                    # the lumped lines' filter, called by the driver
+        funs.append(line_filter(pb, pb.c.pressure_noise))
     with tempfile.TemporaryDirectory(prefix="wb_fast_") as tmp:
         gen = ca.CodeGenerator("wb_fast.c", {"with_header": False})
         for f in funs:
@@ -115,7 +122,16 @@ def _source(pb) -> str:
         "SQP_DAMPING": SQP_DAMPING, **_settings_layout(pb),
         "NSOFT": len(pb.soft), "SOFT_I": ", ".join(str(i) for i, _ in pb.soft),
         "SOFT_J": ", ".join(str(j) for _, j in pb.soft), "W_LO": float(pb.w_lo),
-        "W_HI": float(pb.w_hi)}
+        "W_HI": float(pb.w_hi), "LSTART": _line_start_sources(pb.nx)}
+
+
+def _line_start_sources(nx: int) -> str:
+    """The driver's LSTART: per lumped line state, the index of the scaled measurement
+    it starts at (2 p_a, 3 p_b) or -1 (zero), read from :func:`.lines.line_start`."""
+    if nx <= len(NMPC_STATES):
+        return ""
+    z, _ = line_start(np.array([0.0, 0.0, 2.0, 3.0]), nx)
+    return ", ".join(str(int(v)) if v else "-1" for v in z[len(NMPC_STATES):])
 
 
 #: fmax / fmin inlined (~230 calls per interval map at N = 20), from the JIT module
@@ -161,7 +177,9 @@ class CompiledMemory:
 
     Attributes (views, SI where stated): ``X`` (nx, N + 1) and ``U`` (N,) the plan,
     scaled as in :class:`~.results.NMPCState`; ``u_prev`` scaled command applied;
-    ``r_prev`` m; ``z`` (nx,) scaled measured state (and lumped lines' estimate); ``d`` N force estimate; ``t`` s;
+    ``r_prev`` m; ``z`` (nx,) scaled measured state (and lumped lines' estimate); ``d`` N
+    force estimate; ``t`` s; ``line_cov`` (nl^2,) covariance of the lumped lines'
+    estimate (:mod:`.lines`; None before the first sample or without lines);
     :attr:`info` the last update's :class:`~.results.StepInfo`; ``working_set``
     (N + ns bounds, then the QP's rows: +1 upper, -1 lower, 0 inactive) the last QP's
     active constraints, the warm start of the next.
@@ -173,11 +191,27 @@ class CompiledMemory:
         self.N, self.nx = N, nx
         n = nx * (N + 1) + N
         it = n + 5 + nx
+        nl = nx - len(NMPC_STATES)
+        pl = size - 1 - nl * nl                        # the driver's M_PL, M_PLOK after it
         self._off = {"u_prev": n, "r_prev": n + 1, "z": n + 2, "d": n + 2 + nx,
-                     "t": n + 3 + nx, "it": it, "qps": it + 9 + nx, "ws": it + 12 + nx}
-        #: covariance of the lumped lines' estimate (:mod:`.lines`), None before the
-        #: first sample or without lines
-        self.line_cov: np.ndarray | None = None
+                     "t": n + 3 + nx, "it": it, "qps": it + 9 + nx, "ws": it + 12 + nx,
+                     "pl": pl}
+
+    @property
+    def line_cov(self) -> np.ndarray | None:
+        if self.nx == len(NMPC_STATES) or self.buf[-1] == 0.0:
+            return None
+        return self.buf[self._off["pl"]:-1]
+
+    @line_cov.setter
+    def line_cov(self, cov) -> None:
+        if self.nx == len(NMPC_STATES):
+            return
+        if cov is None:
+            self.buf[-1] = 0.0
+        else:
+            self.buf[self._off["pl"]:-1] = np.asarray(cov, dtype=float).ravel()
+            self.buf[-1] = 1.0
 
     def _at(self, name: str) -> int:
         return self._off[name]
@@ -208,7 +242,7 @@ class CompiledMemory:
 
     @property
     def working_set(self) -> np.ndarray:
-        return self.buf[self._at("ws"):]
+        return self.buf[self._at("ws"):self._off["pl"]]
 
     def qp_counts(self) -> tuple[int, int, int]:
         """The last sample's DAQP calls, rows given to DAQP in all (of the QP's rows,
@@ -294,7 +328,7 @@ class CompiledNMPC:
             raise MemoryError(f"the compiled NMPC step could not allocate its work (at most "
                               f"{_MAX_LIVE} compiled NMPCs of one horizon alive at once)")
         weakref.finalize(self, so.wb_fast_free, self._h)
-        self._y = np.zeros(pb.nx)
+        self._y = np.zeros(len(NMPC_STATES))
         self._u = np.zeros(1)
         self._yp, self._up = self._y.ctypes.data, self._u.ctypes.data
         self._call = so.wb_fast_sample
@@ -348,8 +382,6 @@ class CompiledNMPC:
             bad = [k for k, v in (*zip(NMPC_STATES, yy), ("reference", r)) if not isfinite(v)]
             raise InputError(f"the NMPC got a measurement or reference that is not a finite "
                              f"number: {', '.join(bad)}")
-        if self.pb.lines:
-            self._lines(state)
         if self.nmpc.preview is None:
             self._call(self._h, state.ptr, self._yp, r, self._up)
         else:
@@ -358,14 +390,6 @@ class CompiledNMPC:
         if self.pb.valve is not None:                  # planned in the compensated command
             return state, self.pb.valve(self._u[0])
         return state, self._u[0]
-
-    def _lines(self, state: CompiledMemory) -> None:
-        """The lumped lines' estimate (SI) after the measurement in the input buffer
-        (:meth:`.problem.Problem.measured_state`, on the memory's previous sample)."""
-        pb, yy = self.pb, self._y
-        started = state.buf[state._at("t") + 1] != 0.0
-        z, state.line_cov = pb.measured_state(yy[:4] / pb.sx[:4], state if started else None)
-        yy[4:] = z[4:] * pb.sx[4:]
 
     def _node_reference(self, state: CompiledMemory, r: float) -> None:
         """The previewed node reference (scaled) into the buffer the C sample reads."""

@@ -122,14 +122,22 @@ static const int SOFT_I[NSOFT] = {%(SOFT_I)s}, SOFT_J[NSOFT] = {%(SOFT_J)s};
 #define M_TPHASE (M_TIME + 1)   /* s, last sample: lin, condense, QP, post; then samples */
 #define M_QPS (M_TPHASE + 5)    /* DAQP calls, rows given to DAQP, cold fallbacks: last sample */
 #define M_WS (M_QPS + 3)        /* working set of the last QP: +1 upper, -1 lower, 0 */
-#define M_SIZE (M_WS + NW)
+#define NL (NX - 4)             /* lumped lines' states (mpc.lines), estimated here */
+#define M_PL (M_WS + NW)        /* their covariance (NL x NL, column-major) */
+#define M_PLOK (M_PL + NL * NL) /* 1: it holds the last sample's (else: start at rest) */
+#define M_SIZE (M_PLOK + 1)
+#if NL > 0
+/* a line state at rest (lines.line_start): its chamber's pressure (2: p_a, 3: p_b) or
+   no flow (-1) */
+static const int LSTART[NL] = {%(LSTART)s};
+#endif
 
 typedef struct {
   const casadi_real **arg; casadi_real **res; casadi_int *iw; casadi_real *w;
   int mem[3];
   double cfg[C_P + NP];
   double X[NXN], U[NN], Xn[NXN], Un[NN], u0, viol[NX], ok, stp, dd;
-  double R[NN + 1], VR[NN + 1], zm[NX], zp[NX];
+  double R[NN + 1], VR[NN + 1], zm[NX], zp[NX], Pl[NL * NL + 1];
   /* the condensed QP */
   double H[NZ * NZ], g[NZ], A[NC * NZ], lba[NC], uba[NC], lbx[NZ], ubx[NZ];
   double hh[NXN], G[NXN * NN], Xs[NXN], Us[NN], dw[NZ];
@@ -155,6 +163,9 @@ void wb_fast_free(wb_fast_t *h) {
   if (!h) return;
   if (h->mem[0] >= 0) { wb_nmpc_lin_release(h->mem[0]); wb_nmpc_lin_decref(); }
   if (h->mem[1] >= 0) { wb_nmpc_post_release(h->mem[1]); wb_nmpc_post_decref(); }
+#if NL > 0
+  if (h->mem[2] >= 0) { wb_nmpc_lines_release(h->mem[2]); wb_nmpc_lines_decref(); }
+#endif
   free(h->arg); free(h->res); free(h->iw); free(h->w); free(h);
 }
 
@@ -166,6 +177,9 @@ wb_fast_t *wb_fast_new(const double *cfg) {
   h->mem[0] = h->mem[1] = h->mem[2] = -1;
   wb_nmpc_lin_work(&sz[0][0], &sz[0][1], &sz[0][2], &sz[0][3]);
   wb_nmpc_post_work(&sz[1][0], &sz[1][1], &sz[1][2], &sz[1][3]);
+#if NL > 0
+  wb_nmpc_lines_work(&sz[2][0], &sz[2][1], &sz[2][2], &sz[2][3]);
+#endif
   for (k = 0; k < 3; ++k) {
     na = WB_MAX(na, sz[k][0]); nr = WB_MAX(nr, sz[k][1]);
     ni = WB_MAX(ni, sz[k][2]); nw = WB_MAX(nw, sz[k][3]);
@@ -176,6 +190,10 @@ wb_fast_t *wb_fast_new(const double *cfg) {
   h->w = (casadi_real *)malloc(sizeof(casadi_real) * nw);
   wb_nmpc_lin_incref(); h->mem[0] = wb_nmpc_lin_checkout();
   wb_nmpc_post_incref(); h->mem[1] = wb_nmpc_post_checkout();
+#if NL > 0
+  wb_nmpc_lines_incref(); h->mem[2] = wb_nmpc_lines_checkout();
+  if (h->mem[2] < 0) { wb_fast_free(h); return 0; }
+#endif
   if (!h->arg || !h->res || !h->iw || !h->w || h->mem[0] < 0 || h->mem[1] < 0) {
     wb_fast_free(h); return 0;
   }
@@ -486,7 +504,36 @@ static void reference(wb_fast_t *h, double r, int started, double r_prev) {
   }
 }
 
+/* the lumped lines' estimate into h->zm[4..] (lines.line_filter: one step of the Kalman
+   filter from the last sample's state, command and force estimate; at rest,
+   lines.line_start, at the first sample, without the last sample's covariance, or when
+   the step fails or is not finite: Problem.measured_state) */
+static void lines(wb_fast_t *h, double *m, int started) {
+#if NL > 0
+  int i, ok = started && m[M_PLOK] != 0.0;
+  if (ok) {
+    h->arg[0] = m + M_Z; h->arg[1] = m + M_UPREV; h->arg[2] = m + M_D; h->arg[3] = h->zm;
+    h->arg[4] = m + M_PL;
+    h->res[0] = h->zp; h->res[1] = h->Pl;
+    ok = !wb_nmpc_lines(h->arg, h->res, h->iw, h->w, h->mem[2]);
+    for (i = 0; i < NX && ok; ++i) ok = fabs(h->zp[i]) < INFINITY;
+    for (i = 0; i < NL * NL && ok; ++i) ok = fabs(h->Pl[i]) < INFINITY;
+  }
+  if (ok) {
+    for (i = 0; i < NL; ++i) h->zm[4 + i] = h->zp[4 + i];
+    memcpy(m + M_PL, h->Pl, sizeof(double) * NL * NL);
+  } else {
+    for (i = 0; i < NL; ++i) h->zm[4 + i] = LSTART[i] < 0 ? 0.0 : h->zm[LSTART[i]];
+    for (i = 0; i < NL * NL; ++i) m[M_PL + i] = 0.0;
+  }
+  m[M_PLOK] = 1.0;
+#else
+  (void)h; (void)m; (void)started;
+#endif
+}
+
 /* one sample: memory m updated in place, command (V) in *u; returns 1 on success.
+   y: the measured x, v, p_a, p_b (SI; the lumped lines' states are estimated here);
    RV: the node reference given (scaled position, then velocity, N + 1 each: the
    preview, made by the caller) or 0 (extrapolated from r here) */
 int wb_fast_sample_ref(wb_fast_t *h, double *m, const double *y, double r, const double *RV,
@@ -496,7 +543,8 @@ int wb_fast_sample_ref(wb_fast_t *h, double *m, const double *y, double r, const
   double up, dprev, est, d;
   clock_gettime(CLOCK_MONOTONIC, &t0);
   h->qps[0] = h->qps[1] = h->qps[2] = 0.0;
-  for (i = 0; i < NX; ++i) h->zm[i] = y[i] / c[C_sx0 + i];
+  for (i = 0; i < 4; ++i) h->zm[i] = y[i] / c[C_sx0 + i];
+  lines(h, m, started);
   if (RV) {
     memcpy(h->R, RV, sizeof(double) * (NN + 1)); memcpy(h->VR, RV + NN + 1, sizeof(double) * (NN + 1));
   } else reference(h, r, started, m[M_RPREV]);

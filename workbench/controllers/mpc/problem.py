@@ -102,7 +102,9 @@ class Problem:
     def measured_state(self, zm: np.ndarray, state) -> tuple[np.ndarray, np.ndarray | None]:
         """(scaled state the plan starts from, line covariance) from the measured x, v,
         p_a, p_b (scaled) and the previous sample's memory (None: the first sample):
-        with lumped lines their states estimated (:mod:`.lines`), else ``zm``."""
+        with lumped lines their states estimated (:mod:`.lines`; at rest at the first
+        sample and after a step that is not finite, as the compiled sample does), else
+        ``zm``."""
         if not self.lines:
             return zm, None
         from .lines import line_start
@@ -110,7 +112,10 @@ class Problem:
             return line_start(zm, self.nx)
         z, Pl = self.line_step(np.asarray(state.z, dtype=float), float(state.u_prev),
                                float(state.d), zm[:len(NMPC_STATES)], state.line_cov)
-        return np.asarray(z, dtype=float).ravel(), np.asarray(Pl, dtype=float).ravel()
+        z, Pl = np.asarray(z, dtype=float).ravel(), np.asarray(Pl, dtype=float).ravel()
+        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(Pl))):
+            return line_start(zm, self.nx)             # a failed step: the lines at rest
+        return z, Pl
 
     def _scaling(self, m) -> None:
         """Horizon, sample time and the scales of states and command."""

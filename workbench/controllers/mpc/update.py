@@ -176,7 +176,7 @@ def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
     new = NMPCState(X=mem.X.copy(), U=mem.U[None, :].copy(), u_prev=float(b[o["u_prev"]]),
                     r_prev=r, z=b[o["z"]:o["z"] + pb.nx].copy(), d=float(b[o["d"]]), lam=None,
                     info=mem.step_info(pb, time.perf_counter() - t0), t=float(b[o["t"]]),
-                    working_set=b[o["ws"]:].copy(),
+                    working_set=mem.working_set.copy(),
                     line_cov=None if mem.line_cov is None else mem.line_cov.copy())
     for a in (new.X, new.U, new.z, new.working_set):
         a.flags.writeable = False
@@ -208,7 +208,8 @@ def _sqp_update(pb, s: _Sample, state: NMPCState | None, warm: bool, dprev: floa
 def _sqp(pb, X, U, shift: bool, s: _Sample, dprev: float, est: float, iters: int):
     """Up to ``iters`` Gauss-Newton steps; stops at a full step below tolerance.
 
-    The force estimate is updated in the first step only (``est``). In mode sqp the
+    The force estimate is updated in the first step only (``est``). A step whose QP
+    CasADi refuses (NaN in it) fails, as in the compiled sample. In mode sqp the
     steps taken are halved (:data:`SQP_DAMPING`) at each full step that is not below
     :data:`SQP_CONTRACTION` times the one before and turns the commands back (its
     moves against the previous step's: a cycle; the compiled sample likewise).
@@ -218,8 +219,17 @@ def _sqp(pb, X, U, shift: bool, s: _Sample, dprev: float, est: float, iters: int
     sh = 1.0 if shift else 0.0
     a, prev, dprev_u, damp = 1.0, math.inf, None, pb.c.mode == "sqp"
     for it in range(1, iters + 1):
-        Xn, Un, _, viol, okk, stp, dd = pb.step(X, U, sh, s.z, s.R, s.VR, s.u_prev, s.z_prev,
-                                                dprev, est, pb.P)
+        try:
+            Xn, Un, _, viol, okk, stp, dd = pb.step(X, U, sh, s.z, s.R, s.VR, s.u_prev,
+                                                    s.z_prev, dprev, est, pb.P)
+        except RuntimeError as exc:
+            # CasADi's QP plugin refuses a QP with NaN in it (a plan whose states left
+            # the model's domain: the linearisation not finite) by an error; the
+            # compiled sample fails such a step: so does this one (then the fallbacks)
+            from ...output import reraise_interrupt
+            reraise_interrupt(exc)
+            ok = False
+            break
         ok = bool(okk)
         if it == 1:
             d = dprev = float(dd)
