@@ -82,8 +82,11 @@ LINE_MODELS = ("volume", "lumped")
 #: motion against the Stribeck drop through the air's compliance: stick-slip), and stays
 #: stuck 80-125 ms while the force swings from pushing up to breaking away down; the
 #: chattering one sticks only at the reversal, 44 ms (seed 0; scratch
-#: /tmp/h14m/look.py, rev.py). A quiet NMPC therefore needs a friction compensation for
-#: the reversal (issue 14's item 1) before the lines can be its default.
+#: /tmp/h14m/look.py, rev.py). A narrower predicted friction does not help: one
+#: segment with v_e 2.6 mm/s and 16 substeps (the 5.25 mm/s default's half), sine
+#: 0.58 -> 1.13 mm (seed 0), 1.33 mm (seed 3), activity 0.38 -> 0.42-0.48 V. A quiet
+#: NMPC therefore needs a friction compensation for the reversal (issue 14's item 1)
+#: before the lines can be its default.
 #: Tried with "lumped" (h14j): position tolerance 1 mm, sine 0.61-0.95 mm on seeds 0-4,
 #: activity 0.39-0.43 V, perturbed rig 2.18 mm and a hold pulsing; command-rate
 #: tolerance 0.1 V, activity 0.10-0.14 V but sine 1.16-1.24 mm (seeds 0, 3). Two
