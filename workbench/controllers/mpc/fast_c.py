@@ -2,8 +2,10 @@
 and post, with the condensing done here and the QP solved by DAQP on the rows that
 may be active.
 
-The driver follows :mod:`.update`'s sample logic (scale, node reference, shift,
-force estimate, Gauss-Newton steps, cold-start and previous-plan fallbacks).
+The driver follows :mod:`.update`'s sample logic (scale, the lumped lines' estimate
+by the generated filter step ``wb_nmpc_lines`` of :func:`.lines.line_filter`, node
+reference, shift, force estimate, Gauss-Newton steps, cold-start and previous-plan
+fallbacks).
 
 *Condensing by the block recursion.* The QP is :func:`.qp.condense`'s, built here
 from the interval Jacobians: the node corrections' sensitivities to the moves by
@@ -127,8 +129,7 @@ static const int SOFT_I[NSOFT] = {%(SOFT_I)s}, SOFT_J[NSOFT] = {%(SOFT_J)s};
 #define M_PLOK (M_PL + NL * NL) /* 1: it holds the last sample's (else: start at rest) */
 #define M_SIZE (M_PLOK + 1)
 #if NL > 0
-/* a line state at rest (lines.line_start): its chamber's pressure (2: p_a, 3: p_b) or
-   no flow (-1) */
+/* a line state at rest (lines.line_start): its chamber's pressure (2, 3) or 0 (-1) */
 static const int LSTART[NL] = {%(LSTART)s};
 #endif
 

@@ -25,7 +25,9 @@ ahead, moving sections, 300 Pa pressure noise; /tmp/h14j/pred2.py): position err
 1-100 kPa per sample (the 4-state model 201 um); 161 um with the segment model alone
 (no correction), 43 um started from the rig's true line state.
 
-The first sample starts the lines at rest: node pressure = chamber pressure, no flow.
+The first sample starts the lines at rest: node pressure = chamber pressure, no flow
+(and so does a step that is not finite). The compiled sample (:mod:`.fast`) runs the
+same step, generated as C, inside its one call per sample.
 """
 
 from __future__ import annotations
