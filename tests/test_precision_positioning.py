@@ -111,16 +111,17 @@ interpolated on the rig's own moves, the first pulse far off on the lines' flow,
 stop rule on the typical jump) for PID and FL only (design.hold_aims: they hand the hold
 a piston 1.7-2.5 mm off; the NMPC lands within quanta and keeps the hold its pass was
 measured with, bit for bit), and for them a pulse waits for the ringing only down to
-F_c / 4, the force loop does not follow the ringing, and the hold stops after 3 moves
-that land no closer (hold module docstring). Test profile, worst steady state after the
+F_c / 4, the force loop does not follow the ringing, a piston in its bin is unloaded
+beyond F_c / 4, and the hold stops after 3 moves that land no closer (hold module
+docstring). Test profile, worst steady state after the
 steps / holds with a limit cycle, seeds 0/1/2 (/tmp/h14n/ev.py, loaded machine):
 
-  PID  c64ceee: 0.406/0.372/0.271 mm, 1/1/0    now: 0.085/0.101/0.067 mm, 0/0/0
-  FL   c64ceee: 0.119/0.099/0.118 mm, 0/0/0    now: 0.062/0.080/0.048 mm, 0/0/0
+  PID  c64ceee: 0.406/0.372/0.271 mm, 1/1/0    now: 0.085/0.110/0.075 mm, 0/0/0
+  FL   c64ceee: 0.119/0.099/0.118 mm, 0/0/0    now: 0.111/0.109/0.064 mm, 0/0/0
 
 Precision profile --quick seed 0, holds with a limit cycle: PID 3 -> 2 of 9 (the walks
 after the 125 and 250 mm steps, which PID ends 15 quanta off, still end in the holds'
-second halves), FL 1 -> 1.
+second halves), FL 1 -> 0 (limit_cycle_free).
 
 Tried and not kept: cutting a pulse short when the piston is seen moving (never
 fired: the piston breaks away at the end of the forward half or later, the line's

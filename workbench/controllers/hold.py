@@ -88,6 +88,18 @@ moves that left the piston no closer than its closest, the hold stops
 (:meth:`HoldPositioner._hopped`). Without it (the NMPC): the bracket alone, as its
 precision pass was measured.
 
+An aiming hold unloads a still piston in its bin instead of
+leaving it. Why: the pulses leave a net force behind (their reverse half does not
+return all the gas: 5-10 N on the precision rig), which a friction that creeps turns
+into motion (foreign rig, smooth Stribeck law, FL: -5.7 N moved a locked piston 0.11
+mm out of its bin in 0.24 s, and the hold pulsed it back, 14-27 command changes per
+hold). Unloading a stuck piston cannot move it under any friction law (the force only
+falls), so the stuck piston stays where it is. Only beyond ``ring_band``
+(F_c / 4): the loop's smallest opening changes the force by up to 1.25 N per sample
+near a stroke end, and a narrower band ticked with the piston at rest (precision
+profile --quick, hold at 450 mm: 22 command changes). The NMPC keeps its rules (as
+:attr:`quiet`).
+
 The law underneath: while the hold commands, :func:`~.compensation.held` keeps the
 law's integral or force estimate from winding up (the NMPC's force estimate is set to
 the zero the hold keeps, its last command to the opening applied).
@@ -334,10 +346,11 @@ class HoldPositioner:
                 s.update(mode=PULSE, k=1, dir=d, x0=x_m, pulses=s["pulses"] + 1,
                          tries=s.get("tries", 0) + 1, a=self._strength(s, d, e))
                 return s, d * self.pulse_shape(s["a"], x_m)[1]
-        if in_bin and still:                         # held by its friction: leave it
+        if in_bin and still and not self.aim:        # held by its friction: leave it
             s["unloading"] = False
             return s, 0.0
-        return s, self._unload(s, s["fm"], x_m)
+        # aiming: a piston in its bin is unloaded too, beyond F_c / 4 (module docstring)
+        return s, self._unload(s, s["fm"], x_m, self.ring_band if in_bin and still else 0.0)
 
     @property
     def quiet(self) -> float:
@@ -364,11 +377,12 @@ class HoldPositioner:
         """
         return max(self.force_band, self.ring_band) if self.aim else self.force_band
 
-    def _unload(self, s: dict, f: float, x: float | None = None) -> float:
+    def _unload(self, s: dict, f: float, x: float | None = None, floor: float = 0.0) -> float:
         """Opening of the force loop that holds the net force ``f`` (N) at zero, against
         it with a time constant of ``UNLOAD_SAMPLES`` samples (``force_rate`` N/s at
-        full opening); with hysteresis: it starts beyond ``force_band`` and stops
-        within half of it (else it would tick at the band's edge).
+        full opening); with hysteresis: it starts beyond ``force_band`` (and beyond
+        ``floor``, N) and stops within half of it (else it would tick at the band's
+        edge).
 
         With ``aim`` it starts only beyond the band plus the force's spread over the
         dwell: while the chambers ring, the mean over the dwell still swings with the
@@ -384,7 +398,7 @@ class HoldPositioner:
         if self.force_rate <= 0:
             return 0.0
         ring = math.sqrt(s.get("fv", 0.0)) if self.aim else 0.0
-        if abs(f) > self.force_band + ring:
+        if abs(f) > max(self.force_band + ring, floor):
             s["unloading"] = True
         elif abs(f) <= 0.5 * self.force_band:
             s["unloading"] = False
@@ -475,8 +489,8 @@ class HoldPositioner:
         the hold went on drawing. Further pulses are further draws from that scatter,
         each a burst of command activity (a pulse and the force loop after it: about
         ten command changes); no-moves are the bracket's search, not counted. Not
-        enough for that FL: 11-53 changes per hold's second half remain (seeds 0-2),
-        three hops and their settling take most of a hold.
+        enough for that FL: seeds 0/1 still end one hold of two with 53/42 command
+        changes in its second half (three hops and their settling take most of it).
         """
         best = min(s.get("best", math.inf), before)
         if moved >= 0.5 and after > best - 0.5 * self.quantum:
