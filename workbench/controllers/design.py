@@ -526,12 +526,13 @@ def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool,
     prm = plant.params
     if kind == "nmpc":
         from .mpc import NMPC, STATE_EFFECTS
-        from .mpc.model import DESIGN_LINES
+        from .mpc.model import DESIGN_BREAKAWAY, DESIGN_LINES
         keep = [e for e in plant.effects if e not in STATE_EFFECTS
                 and e not in ("valve_deadband", "valve_offset")]
         return NMPC.for_plant(plant, effects=keep, lines=DESIGN_LINES, sample_time=T,
                               max_speed=2.0, horizon=nmpc_horizon(T), jit=jit, preview=preview,
-                              disturbance_gain=nmpc_disturbance_gain(T))
+                              disturbance_gain=nmpc_disturbance_gain(T),
+                              breakaway=DESIGN_BREAKAWAY)
     if kind == "fl":
         lam = (bandwidth if bandwidth is not None else
                _fl_bandwidth(T, line_delay(plant), 1.0 / estimate_lag if estimate_lag > 0 else math.inf))

@@ -126,6 +126,12 @@ class NMPC:
         With ``jit``, modes rti and sqp and DAQP: run each update as one
         compiled C call (:mod:`.fast`; same plans). :attr:`compiled_reason` says why
         an NMPC runs the Python update instead.
+    breakaway : bool
+        A stuck piston that must move: the force estimate set to the static friction
+        the smooth prediction lacks, against the wanted direction, until it has moved
+        (:mod:`.breakaway`; a model with dry friction). Lets a quiet NMPC (a small
+        ``command_rate_tolerance``) break away at a reversal as fast as a chattering
+        one.
     """
 
     model: Any
@@ -156,6 +162,7 @@ class NMPC:
     friction_width: float | None = field(default=None,
                                          metadata=_meta("m/s", "tanh width of dry friction"))
     pressure_noise: float = field(default=300.0, metadata=_meta("Pa", "pressure sensor noise"))
+    breakaway: bool = field(default=False, metadata=_meta("", "static friction while stuck"))
 
     #: Measurements read (wrap in :class:`~workbench.controllers.observer.Observed` to
     #: run on x, p_a, p_b only).

@@ -57,6 +57,7 @@ class NMPCState:
         QP (the bounds, then the rows: +1 upper, -1 lower, 0 inactive), where its next
         QP starts; else None.
     line_cov : (nl^2,) covariance of the lumped lines' estimate (:mod:`.lines`), else None.
+    brk : break-away state of a stuck piston (:mod:`.breakaway`), else None.
     """
 
     X: Any
@@ -70,6 +71,7 @@ class NMPCState:
     t: float = 0.0
     working_set: Any = None
     line_cov: Any = None
+    brk: Any = None
 
 
 @dataclass(frozen=True, eq=False)

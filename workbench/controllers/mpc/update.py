@@ -78,6 +78,7 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     else:
         s = _Sample(zm, R, VR, state.u_prev, state.z)
         dprev, est = state.d, 1.0
+    brk, dprev = _breakaway(pb, y, r, state, dprev)
     warm = state is not None and c.warm_start
     lam = None
     if c.mode == "ipopt":
@@ -90,7 +91,24 @@ def advance(pb, y: dict, r: float, state: NMPCState | None) -> NMPCState:
     w0 = float(U[0])
     info = _step_info(pb, it, ok, viol, restarted, time.perf_counter() - t0)
     return NMPCState(X=X, U=U, u_prev=w0, r_prev=r, z=zm, d=d, lam=lam, info=info, t=t,
-                     line_cov=line_cov)
+                     line_cov=line_cov, brk=brk)
+
+
+def _breakaway(pb, y: dict, r: float, state: NMPCState | None, d: float):
+    """(break-away state, force estimate N to start this sample from): the
+    setting ``breakaway`` (:mod:`.breakaway`), else (None, ``d``)."""
+    if state is None or not pb.c.breakaway:
+        return None, d
+    fr = getattr(pb, "_dry", False)
+    if fr is False:
+        from .breakaway import dry_friction
+        pb._dry = fr = dry_friction(pb)
+    if fr is None:
+        return None, d
+    from .breakaway import breakaway_force
+    want = float(node_reference(pb, r, state.r_prev, state.t + pb.T)[1][0])
+    return breakaway_force(fr, state.brk, want, float(y["v"]),
+                           float(y.get("x_measured", y["x"])), d)
 
 
 def _measured(y: dict, r: float) -> np.ndarray:
@@ -171,13 +189,15 @@ def _advance_compiled(pb, fast, y: dict, r: float, state: NMPCState | None,
                            state.t, state.working_set))
         mem.line_cov = None if state is None else state.line_cov
     pb._compiled_last = None                           # mem changes: no state matches it
-    mem, _ = fast.update(mem, r, y)
     b, o = mem.buf, mem._off
+    brk, d = _breakaway(pb, y, r, state, float(b[o["d"]]))
+    b[o["d"]] = d
+    mem, _ = fast.update(mem, r, y)
     new = NMPCState(X=mem.X.copy(), U=mem.U[None, :].copy(), u_prev=float(b[o["u_prev"]]),
                     r_prev=r, z=b[o["z"]:o["z"] + pb.nx].copy(), d=float(b[o["d"]]), lam=None,
                     info=mem.step_info(pb, time.perf_counter() - t0), t=float(b[o["t"]]),
                     working_set=mem.working_set.copy(),
-                    line_cov=None if mem.line_cov is None else mem.line_cov.copy())
+                    line_cov=None if mem.line_cov is None else mem.line_cov.copy(), brk=brk)
     for a in (new.X, new.U, new.z, new.working_set):
         a.flags.writeable = False
     pb._compiled_last = (new, mem)
