@@ -410,7 +410,7 @@ def simulate_logged(plant_file, reference, duration, seed=0, overrides=None, fri
 
 
 def log_csv(path, plant_file, t, Z, U, rng, reference=None, pressures=True, x_noise=20e-6,
-            p_noise=500.0, bits=12, colour=0.0, units="si", supply=False):
+            p_noise=500.0, bits=12, colour=0.0, units="si", supply=False, declare=True):
     """Write a logger's CSV of :func:`simulate_logged`'s run.
 
     Noise: Gaussian, or with ``colour`` in (0, 1) first-order coloured (AR(1) with that
@@ -418,6 +418,8 @@ def log_csv(path, plant_file, t, Z, U, rng, reference=None, pressures=True, x_no
     over the stroke, pressures over 0..1 MPa absolute). ``units``: "si" or "rig" (t in
     ms, x and r in mm, pressures in gauge bar, declared in the header cells).
     ``pressures``: True, False or "p_a"/"p_b". ``supply``: log p_s as well.
+    ``declare=False``: the rig units are written under the bare column names, as a
+    logger that does not say its units would.
     """
     n = len(t)
     L = load_plant(plant_file)["cylinder.stroke"]
@@ -450,6 +452,8 @@ def log_csv(path, plant_file, t, Z, U, rng, reference=None, pressures=True, x_no
             head.append(f"{name} [bar_g]"); out.append((y - 101325.0) / 1e5)
         else:
             head.append(name); out.append(y)
+    if not declare:
+        head = [h.split(" [")[0] for h in head]
     with open(path, "w", encoding="utf-8") as fh:
         fh.write("# source: tests/foreign_rig.py\n" + ",".join(head) + "\n")
         np.savetxt(fh, np.column_stack(out), delimiter=",", fmt="%.10g")

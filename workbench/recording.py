@@ -35,8 +35,8 @@ import numpy as np
 
 from .errors import InputError
 from .recording_io import KNOWN_COLUMNS, REQUIRED_COLUMNS, Where, read_csv, read_mat, write_atomic
-from .recording_units import (apply_units, check_against_plant, check_plausible, time_hint,
-                              parse_column_map, time_window)
+from .recording_units import (also_suspect, apply_units, check_against_plant, check_plausible,
+                              parse_column_map, time_hint, time_window)
 from .signals import FIT_SIGNALS, fit, fit_signals
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -466,11 +466,14 @@ def _checked(raw_columns: Any, data: Any, metadata: Any, source: str, where: Whe
     names, data, metadata = apply_units(list(raw_columns), data, metadata, source, where,
                                         parse_column_map(columns))
     columns_t, data_n, meta = _normalize(names, data, metadata, source, where)
-    _validate(columns_t, data_n, meta, source, where, need)
-    if window is not None:
-        data_n, where = time_window(data_n, window, source, where)
-    if plausible:
-        check_plausible(data_n, meta, source, where)
+    try:
+        _validate(columns_t, data_n, meta, source, where, need)
+        if window is not None:
+            data_n, where = time_window(data_n, window, source, where)
+        if plausible:
+            check_plausible(data_n, meta, source, where)
+    except InputError as exc:
+        raise also_suspect(exc, data_n, PRESSURE_RANGE) from None
     if plant is not None:
         check_against_plant(data_n, getattr(plant, "params", plant), source, where)
     return Recording(columns_t, data_n, meta, source, need)

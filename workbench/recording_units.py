@@ -33,7 +33,7 @@ from .recording_io import Where
 __all__ = ["QUANTITY", "UNIT_SCALES", "JITTER_TOLERANCE", "GAP_FACTOR", "MAX_SAMPLE_STEP",
            "MAX_COMMAND", "MAX_POSITION", "STROKE_MARGIN", "COMMAND_MARGIN",
            "parse_column_map", "apply_units", "check_plausible", "check_against_plant",
-           "time_window", "time_hint"]
+           "time_window", "time_hint", "unit_suspects", "also_suspect"]
 
 _P_ATM = 101325.0  # Pa, offset of gauge pressures
 
@@ -282,6 +282,57 @@ def check_plausible(data: Mapping[str, np.ndarray], metadata: Mapping[str, str],
         if name in data:
             _bound(data[name], MAX_POSITION, name, "m", "mm? " + _declare(name, "mm"),
                    source, where)
+
+
+def unit_suspects(data: Mapping[str, np.ndarray], p_range: tuple[float, float]
+                  ) -> dict[str, str]:
+    """Columns whose values look like another unit, by the plant-free bounds of
+    :func:`check_plausible` (time step, |u|, |x|, |r|) and the absolute pressure range
+    ``p_range`` (Pa): column -> the unit they look like. A logger that writes one column
+    in rig units usually writes the others so too; one error names them all
+    (:func:`also_suspect`)."""
+    out: dict[str, str] = {}
+
+    def finite(y):
+        y = np.asarray(y, dtype=float)
+        return y[np.isfinite(y)]
+    t = finite(data["t"]) if "t" in data else np.empty(0)
+    if t.size > 1 and float(np.median(np.diff(t))) > MAX_SAMPLE_STEP:
+        out["t"] = "ms"
+    u = finite(data["u"]) if "u" in data else np.empty(0)
+    if u.size and float(np.max(np.abs(u))) > MAX_COMMAND:
+        out["u"] = "mV"
+    for name in ("x", "r"):
+        y = finite(data[name]) if name in data else np.empty(0)
+        if y.size and float(np.max(np.abs(y))) > MAX_POSITION:
+            out[name] = "mm"
+    for name in ("p_a", "p_b", "p_s"):
+        y = finite(data[name]) if name in data else np.empty(0)
+        if y.size and float(np.max(y)) < 20.0:        # a pneumatic drive runs at <= ~10 bar
+            out[name] = "bar_g"
+        elif y.size and float(np.max(y)) < p_range[0]:
+            out[name] = "kPa_g"
+    return out
+
+
+def also_suspect(exc: InputError, data: Mapping[str, np.ndarray],
+                 p_range: tuple[float, float]) -> InputError:
+    """``exc`` (a check of one column's unit) with every other column that looks like
+    another unit named too, and the one units line that declares them all; ``exc``
+    itself when no other column does."""
+    sus = unit_suspects(data, p_range)
+    others = {k: v for k, v in sus.items() if f"'{k}'" not in str(exc.location or "")}
+    if not others or not sus:
+        return exc
+    prefix = f"{exc.source}, {exc.location}: " if exc.source and exc.location else \
+        f"{exc.source}: " if exc.source else ""
+    text = str(exc)[len(prefix):] if str(exc).startswith(prefix) else str(exc)
+    line = ", ".join(f"{k}={v}" for k, v in sus.items())
+    listed = ", ".join(f"'{k}' ({v}?)" for k, v in others.items())
+    return InputError(f"{text}. Other columns look like rig units too: {listed}; if so, "
+                      f"declare them all in one line: '# units: {line}' (bar_g: gauge bar; "
+                      "check each guess against the logger's manual)",
+                      source=exc.source, location=exc.location)
 
 
 def _declare(name: str, unit: str) -> str:

@@ -25,6 +25,22 @@ All quantities come from the recording and the plant file (no threshold tuned to
 case): pressures by their 99th percentile (one spike does not set the size), the
 chamber volume at the recording's mean position (the smaller chamber), the noise of
 the short-horizon predictor (:func:`.predict._sigma`).
+
+**A leak must show in the chamber equations** (:func:`chamber_evidence`). A leak acts
+on the chambers' mass balance only. Driven by the *measured* motion and command, with
+the other chamber's recorded pressure imposed (:func:`.recorded.chamber_estimate`), a
+chamber's equation involves no force: a friction law that is not the rig's, a wrong
+mass or load cannot bias it. So a leak that is on the rig makes these force-free
+estimates of the recorded pressures better, and a leak that only absorbs a force-side
+misfit of the prediction makes them worse. Measured on test_diagnose.py's foreign
+dry-friction recording (smooth Stribeck law 16.3/22.3 N, no leak) with the engine's
+friction events refined (``predict.REFINE_STEPS``): the leak named beside the friction,
+4.9e-12 m^3/(s Pa) to atmosphere and 8.4e-11 kg/(s Pa) across the piston (above the
+floor), moved the force-free estimates from 0.63 kPa rms (the noise level) to 6.2 kPa;
+a real leak of 2.5e-10 m^3/(s Pa) moves them from 171/203 kPa (p_a/p_b) to 0.69 kPa.
+A leak is named only if the
+set's plant (its other members applied) fits the recorded pressures this way better
+with the leak than without it.
 """
 
 from __future__ import annotations
@@ -39,7 +55,7 @@ from ..physics.supply import leak_to_atmosphere
 from .data import Prepared
 from .predict import Predictor
 
-__all__ = ["LeakFloor"]
+__all__ = ["LeakFloor", "chamber_misfit", "chamber_evidence"]
 
 #: Quantile of the recorded pressures (and pressure differences) taken as their largest
 #: value: one spike does not set the size a leak must have.
@@ -118,3 +134,58 @@ class LeakFloor:
         return {"sigma_p_Pa": self.sigma_p, "horizon_s": self.horizon,
                 "chamber_volume_m3": self.volume, "p_high_Pa": self.p_high,
                 "dp_cross_Pa": self.dp_cross}
+
+
+def chamber_misfit(prep: Prepared, plant: Any) -> float | None:
+    """Rms error (Pa) of the force-free chamber estimates of the recorded pressures:
+    each recorded chamber integrated by ``plant``'s own equations with the measured
+    position, velocity and command and the other chamber's smoothed pressure imposed
+    (:func:`.recorded.chamber_estimate`), from its recorded start, each joined
+    recording from its own start; over the samples where the chamber was recorded.
+    None without a recorded pressure or when the integration is not finite."""
+    from .recorded import chamber_estimate
+    sides = prep.pressures
+    if not sides:
+        return None
+    u = np.asarray(prep.rec["u"], dtype=float)
+    cuts = list(prep.starts or [0]) + [prep.n]
+    sq, count = 0.0, 0
+    for side in sides:
+        other = "p_b" if side == "p_a" else "p_a"
+        meas, p_o = np.asarray(prep.measured(side), float), prep.smoothed(other)
+        p_s, mask = prep.smoothed(side), prep.mask(side)
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            m = mask[a:b] & np.isfinite(meas[a:b])
+            if b - a < 2 or not m.any() or not np.isfinite(p_s[a]):
+                continue
+            est = chamber_estimate(plant, side, float(p_s[a]), prep.xs[a:b], prep.v[a:b],
+                                   p_o[a:b], u[a:b], prep.dt)
+            err = (est - meas[a:b])[m]
+            if not np.all(np.isfinite(err)):
+                return None
+            sq += float(np.sum(err ** 2))
+            count += int(err.size)
+    return float(np.sqrt(sq / count)) if count else None
+
+
+def chamber_evidence(prep: Prepared, without: Mapping[str, Any],
+                     leak: Mapping[str, Any]) -> dict[str, Any]:
+    """Whether a leak shows in the force-free chamber estimates (module docstring).
+
+    Parameters
+    ----------
+    prep : the prepared recording. without : plant keys (dotted) of the other members
+        of the set, applied to the nominal plant. leak : the leak's plant keys.
+
+    Returns
+    -------
+    ``{"without_Pa": .., "with_Pa": .., "shows": bool}``: the rms errors (Pa) of
+    :func:`chamber_misfit` without and with the leak; ``shows`` is True when the leak
+    makes them smaller, or when they cannot be computed (no judgement: the leak is
+    then judged by the prediction cost alone).
+    """
+    base = prep.plant.with_params(**dict(without)) if without else prep.plant
+    e0 = chamber_misfit(prep, base)
+    e1 = chamber_misfit(prep, base.with_params(**dict(leak))) if e0 is not None else None
+    shows = e0 is None or e1 is None or e1 < e0
+    return {"without_Pa": e0, "with_Pa": e1, "shows": bool(shows)}

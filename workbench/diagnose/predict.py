@@ -69,11 +69,20 @@ class Predictor:
     @property
     def n_eff(self) -> float:
         """Effective number of independent observations (for the information criteria):
-        a few per window and signal recorded there, since the residuals within a window
-        are correlated."""
-        pairs = sum(len(self.prep.signals_at(int(i))) for i in self.index[self.starts]) \
-            if self.prep.recorded else self.windows * len(self.signals)
-        return float(max(3 * pairs, 10))
+        a few (3) per :data:`HORIZON` of window and signal recorded there, since the
+        residuals within a window are correlated; a window counts its length in whole
+        horizons (at least one). So a closed-loop segment (position only, 1 s, also as a
+        part of joined recordings) counts five: the loop decorrelates its residuals within
+        a horizon or so (measured on a position-only foreign recording: 49 independent
+        residuals per 1 s segment by their autocorrelation). Counted as one horizon's 3,
+        8 s of a 200 Hz position-only recording of 18/26 N of friction fell short of the
+        information criterion (dBIC 9) while the friction removed 51 %."""
+        ends = np.append(self.starts[1:], len(self.index))
+        seconds = (ends - self.starts) * self.step * self.prep.dt
+        weight = np.maximum(np.round(seconds / HORIZON), 1.0)   # horizons: 1 each
+        counts = [len(self.prep.signals_at(int(i))) for i in self.index[self.starts]] \
+            if self.prep.recorded else [len(self.signals)] * self.windows
+        return float(max(3 * float(np.dot(weight, counts)), 10))
 
     def measured(self, s: str) -> np.ndarray:
         return self.prep.measured(s)[self.index]
