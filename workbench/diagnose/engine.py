@@ -344,7 +344,10 @@ def _project(plant: Plant, z):
 
 def _guarded_step(plant: Plant, h: float, substeps: int, tableau=TABLEAU) -> ca.Function:
     """(z_{k+1}, inexact) over one sample, given ``refine`` (0 or 1): ``substeps`` :data:`TABLEAU`
-    steps, or :data:`REFINE` times as many where ``refine`` is 1 (evaluated only then).
+    steps, or steps of h / :data:`REFINE` where ``refine`` is 1 (evaluated only then;
+    the plain steps where they are that small already: a friction event or an end stop
+    asks for a step of that size, not for REFINE times the sized steps, which would put
+    48 unrolled steps of a lined plant into the compiled code).
 
     Where the step leaves the physically possible states (:func:`_implausible`: at an
     end stop the chamber shrinks to its dead volume and its pressure time constant to
@@ -368,9 +371,10 @@ def _guarded_step(plant: Plant, h: float, substeps: int, tableau=TABLEAU) -> ca.
     cost jumps: the refits then fitted the static friction 7.7 % low)."""
     nx, npar = len(plant.states), len(plant.p0)
     coarse_one = _one_step(plant, h, substeps, "step_coarse", tableau)
-    fine_one = _one_step(plant, h, substeps * REFINE, "step_fine", tableau)
+    n_fine = max(REFINE, substeps)     # steps of at most h/REFINE, never coarser than the plain
+    fine_one = _one_step(plant, h, n_fine, "step_fine", tableau)
     coarse = coarse_one if substeps == 1 else _repeated(coarse_one, substeps, nx, npar)
-    fine = _repeated(fine_one, substeps * REFINE, nx, npar)
+    fine = _repeated(fine_one, n_fine, nx, npar)
     zm, um, pm = ca.MX.sym("z", nx), ca.MX.sym("u"), ca.MX.sym("p", npar)
     refine = ca.MX.sym("refine")
     zc, inexact = coarse(zm, um, pm)
