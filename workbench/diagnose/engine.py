@@ -126,7 +126,19 @@ TABLEAU = ROS4
 #: the --sets rows offset + lines (named right, a valve lag said beside it) or lines +
 #: supply droop (droop only said): what is left there is the 3 segments' form against
 #: the recording's 15 (x 112 um, p 267 Pa rms in 0.2 s windows; 6 segments 42 um,
-#: 104 Pa). So ROS2 for lines until the line candidate's form is finer. A spool lag
+#: 104 Pa). Session 11 tried ROS4 + :func:`stiff_substeps` with 6-segment candidate
+#: lines: the same foreign lumped line was again named as a valve lag alone (228 Hz,
+#: damping 3: an effective 4 ms first-order lag), for a measured reason: the lag alone
+#: predicts x better (308 against 628 noise units over the 0.2 s windows) and the
+#: pressures worse (p_a 22.6 / p_b 11.4 against 7.9 / 5.0) than the lines alone (2.47 m,
+#: 4.9 mm: right), the pair (155) is refused by the per-signal rule (the lag makes p_a
+#: worse than the lines alone: 10.8 against 7.9), and x dominates the cost (its noise is
+#: tiny). The accurately stepped chain has the line's transport delay (L/a = 7.3 ms),
+#: which the one-section lumped model lacks and a lag without delay imitates in x. Row
+#: 14 (offset + lines) stayed named right with the lag said, at 3.4x the time; row 23
+#: (lines + supply droop) named the lines only, the droop no longer even said, at 14x
+#: the time (1292 against 94 s, loaded). So ROS2
+#: for lines until the selection weighs that trade (sets.py). A spool lag
 #: was on ROS2 too until session 11: one ROS4 step per 2 ms sample of the spool as an
 #: ordinary state (h omega ~5 at the 400 Hz a fit may move to) kept its mode weakly
 #: damped in a wrong phase (|R(iy)| 0.52 at y = 4), and the single-effect bench case
