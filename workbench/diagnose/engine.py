@@ -129,10 +129,10 @@ TABLEAU = ROS4
 #: 104 Pa). Session 11 tried ROS4 + :func:`stiff_substeps` with 6-segment candidate
 #: lines: the same foreign lumped line was again named as a valve lag alone (228 Hz,
 #: damping 3: an effective 4 ms first-order lag), for a measured reason: the lag alone
-#: predicts x better (308 against 628 noise units over the 0.2 s windows) and the
-#: pressures worse (p_a 22.6 / p_b 11.4 against 7.9 / 5.0) than the lines alone (2.47 m,
-#: 4.9 mm: right), the pair (155) is refused by the per-signal rule (the lag makes p_a
-#: worse than the lines alone: 10.8 against 7.9), and x dominates the cost (its noise is
+#: predicts x better (308 against 627 noise units over the 0.2 s windows) and the
+#: pressures worse (p_a 22.6 / p_b 11.4 against 8.1 / 4.3) than the lines alone (2.14 m,
+#: 5.1 mm; true 2.5 m, 4 mm), the pair (141) is refused by the per-signal rule (the lag
+#: makes p_a worse than the lines alone: 8.9 against 8.1), and x dominates the cost (its noise is
 #: tiny). The accurately stepped chain has the line's transport delay (L/a = 7.3 ms),
 #: which the one-section lumped model lacks and a lag without delay imitates in x. Row
 #: 14 (offset + lines) stayed named right with the lag said, at 3.4x the time; row 23
