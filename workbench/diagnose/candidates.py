@@ -20,6 +20,7 @@ import numpy as np
 from ..params import EFFECT_NAMES, PlantParams
 
 __all__ = ["Free", "Candidate", "candidates", "PARAMETER_ERROR_KEYS", "LINE_SEGMENTS",
+           "SPOOL_BANDWIDTH_MAX",
            "JOINT_NOMINAL"]
 
 #: Nominal values whose error the diagnosis looks for (``parameter_error``).
@@ -28,6 +29,10 @@ PARAMETER_ERROR_KEYS = ("load.mass", "load.viscous_friction", "valve.sonic_condu
 #: Name of the candidate that corrects every nominal value of
 #: :data:`PARAMETER_ERROR_KEYS` at once.
 JOINT_NOMINAL = "parameter_error:nominal values"
+#: Upper bound of the fitted spool bandwidth, Hz (also its neutral value: no lag at the
+#: sample rates of a recording); the engine sizes a spool's steps for it
+#: (:func:`workbench.diagnose.engine.stiff_substeps`), whatever the fit's start.
+SPOOL_BANDWIDTH_MAX = 400.0
 #: Lumped segments per line in the fitted line model (the length is what matters
 #: for volume, delay and attenuation; more segments only add wave detail).
 LINE_SEGMENTS = 3
@@ -232,9 +237,9 @@ def _valve_and_friction(sc: _Scales) -> list[Candidate]:
             describe="the spool is centred at another command than command_center"),
         Candidate(
             "valve_dynamics", "valve_dynamics",
-            (Free("valve.bandwidth", 2.0, 400.0, 40.0), Free("valve.damping", 0.2, 3.0, 0.8)),
+            (Free("valve.bandwidth", 2.0, SPOOL_BANDWIDTH_MAX, 40.0), Free("valve.damping", 0.2, 3.0, 0.8)),
             grid={"valve.bandwidth": [8.0, 20.0, 50.0], "valve.damping": [0.7]},
-            neutral={"valve.bandwidth": 400.0, "valve.damping": 0.8},
+            neutral={"valve.bandwidth": SPOOL_BANDWIDTH_MAX, "valve.damping": 0.8},
             size=("valve.bandwidth",),
             needs_pressures=False,
             describe="the spool follows the command through a 2nd-order lag"),

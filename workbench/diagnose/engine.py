@@ -19,10 +19,11 @@ samples that can be **re-anchored** on the measurement wherever asked:
 Integration: the 4-stage Rosenbrock method ROS4 of Hairer & Wanner (order 4,
 L-stable; :data:`TABLEAU`) by :func:`workbench.integrate.rosenbrock`, with the
 unpivoted sparse LU of :mod:`workbench.integrate.linalg` written out in SX, at
-one step per sample. A plant with line dynamics or a spool lag is stepped by ROS2
-(Verwer et al. 1999, order 2) at one step per sample, as every plant was until
-session 10 (why: :data:`LINE_TABLEAU`; :func:`stiff_substeps` sizes ROS4's steps
-for those, measured but not used by default). ROS2's error was the replay
+one step per sample. A spool lag (linear, driven by the command alone) is stepped
+exactly and the rest of the plant along its exact motion (:func:`_split_spool`), at
+the steps :func:`stiff_substeps` sizes for the spool candidate's 400 Hz bound. A plant
+with line dynamics is stepped by ROS2 (Verwer et al. 1999, order 2) at one step per
+sample, as every plant was until session 10 (why: :data:`LINE_TABLEAU`). ROS2's error was the replay
 floor the diagnosis' extra effects absorbed (67 um rms in x for the exact model of
 the 25 mm rig; :data:`TABLEAU` for the figures now). Positive diagonal entries of the
 Jacobian (the negative damping of a Stribeck friction curve) are left out of the
@@ -63,11 +64,13 @@ import numpy as np
 
 from ..controllers.pd import clip_and_quantise, pid_law
 from ..integrate import ROS2, ROS4, rosenbrock
+from ..integrate.exact import lag2_split
 from ..integrate.jit import compiled
 from ..physics.friction import stribeck_level
 from ..plant import Plant
+from .candidates import SPOOL_BANDWIDTH_MAX
 
-__all__ = ["Engine", "EngineInputs", "OUTPUTS", "INPUT_ROWS", "stiff_substeps"]
+__all__ = ["Engine", "EngineInputs", "OUTPUTS", "INPUT_ROWS", "stiff_substeps", "line_substeps"]
 
 #: Rows of the engine's output, per sample: simulated x, p_a, p_b (at the sample,
 #: after any re-anchoring), command used, and (``rates``) the model rates dv/dt,
@@ -98,7 +101,7 @@ REFINE = 8
 #: break-away moved the piston 67 um less than the converged solution). A step over
 #: the limit is redone with :data:`REFINE` times smaller steps.
 EXPLICIT_LIMIT = 0.4
-#: The Rosenbrock method of the engine's steps for a plant without lines or a spool lag
+#: The Rosenbrock method of the engine's steps for a plant without lines
 #: (those: :data:`LINE_TABLEAU`): ROS4 (Hairer & Wanner, the L-stable choice), order 4, four stages, three evaluations of f, one Jacobian and one LU per
 #: step. Measured against CVODES from the true state over 0.2 s windows, 2 ms steps
 #: (tests/test_diagnose_rig_engine.py, tests/test_diagnose_lines_replay.py): the
@@ -123,17 +126,24 @@ TABLEAU = ROS4
 #: the --sets rows offset + lines (named right, a valve lag said beside it) or lines +
 #: supply droop (droop only said): what is left there is the 3 segments' form against
 #: the recording's 15 (x 112 um, p 267 Pa rms in 0.2 s windows; 6 segments 42 um,
-#: 104 Pa). So ROS2 for lines until the line candidate's form is finer. The same for a
-#: plant with a spool lag (valve_dynamics), for a reason of its own: the fits move the
-#: spool's bandwidth up to 400 Hz (the candidate's neutral value, no lag), where one
-#: ROS4 step per 2 ms sample (h omega ~5) keeps the spool's mode weakly damped in a
-#: wrong phase (|R(iy)| 0.52 at y = 4) while ROS2 damps it to the quasi-static limit
-#: (0.20) that a fast spool is; the step count is fixed per engine from the start
-#: values (:func:`stiff_substeps`), so it cannot follow. Measured on the single-effect
-#: bench case (concealed dry friction): with ROS4 for the spool, the pair dry friction
-#: + a 222 Hz spool lag cut the short-horizon cost by 37 % (17.4 against 27.7 noise
-#: units; with ROS2 it raised it: 35.9 against 30.1), the set search then explored 40
-#: candidate models instead of 27 and took 61 CPU s instead of 23.
+#: 104 Pa). Session 11 tried ROS4 + :func:`stiff_substeps` with 6-segment candidate
+#: lines: the same foreign lumped line was again named as a valve lag alone (228 Hz,
+#: damping 3: an effective 4 ms first-order lag), for a measured reason: the lag alone
+#: predicts x better (308 against 627 noise units over the 0.2 s windows) and the
+#: pressures worse (p_a 22.6 / p_b 11.4 against 8.1 / 4.3) than the lines alone (2.14 m,
+#: 5.1 mm; true 2.5 m, 4 mm), the pair (141) is refused by the per-signal rule (the lag
+#: makes p_a worse than the lines alone: 8.9 against 8.1), and x dominates the cost (its noise is
+#: tiny). The accurately stepped chain has the line's transport delay (L/a = 7.3 ms),
+#: which the one-section lumped model lacks and a lag without delay imitates in x. Row
+#: 14 (offset + lines) stayed named right with the lag said, at 3.4x the time; row 23
+#: (lines + supply droop) named the lines only, the droop no longer even said, at 14x
+#: the time (1292 against 94 s, loaded). So ROS2
+#: for lines until the selection weighs that trade (sets.py). A spool lag
+#: was on ROS2 too until session 11: one ROS4 step per 2 ms sample of the spool as an
+#: ordinary state (h omega ~5 at the 400 Hz a fit may move to) kept its mode weakly
+#: damped in a wrong phase (|R(iy)| 0.52 at y = 4), and the single-effect bench case
+#: (concealed dry friction) fitted dry friction + a spurious 222 Hz lag; now the spool
+#: is stepped exactly (:func:`_split_spool`) with ROS4 for the rest.
 LINE_TABLEAU = ROS2
 #: |C3| of ROS2's local error C3 h^3 J^2 f (the ``inexact`` flag of a ROS2 step).
 ROS2_C3 = 1.0 / 6.0 - (4.0 * (1.0 + 0.5 ** 0.5) ** 3 - (1.0 + 2.0 ** 0.5) * 3.0
@@ -146,6 +156,10 @@ ROS2_C3 = 1.0 / 6.0 - (4.0 * (1.0 + 0.5 ** 0.5) ** 3 - (1.0 + 2.0 ** 0.5) * 3.0
 #: 7.3). Measured x rms against CVODES (lines of 0.3-3.62 m, 3-15 segments, from the true
 #: state): <= 2.5 um wherever y <= 1.4; 3.5-10 um at y = 2.0-2.7; 25-200 um at 3.6-5.4.
 STIFF_LIMIT = 1.5
+#: Largest h x 2 pi f of a spool lag of bandwidth f a step may take (its motion is
+#: exact, :func:`_split_spool`; the stages see it at 4 instants): measured x <= 3.5 um
+#: rms off CVODES at 2.5 (400 Hz, 1 ms steps), 17-42 um at 2.8-5.0 (:func:`stiff_substeps`).
+SPOOL_LIMIT = 2.6
 #: Local error a step may leave in the position (fraction of the stroke) and in the
 #: chamber pressures (fraction of the supply pressure) before it is redone with
 #: :data:`REFINE` sub-steps: 1e-5 of the stroke is below the least significant bit of
@@ -197,6 +211,7 @@ def _one_step(plant: Plant, h: float, substeps: int = 1, name: str = "engine_ste
     p = ca.SX.sym("p", len(plant.p0))
     dt = h / substeps
     fric = plant.params.has_effect("dry_friction")
+    zs, plant_f, spool_end = _split_spool(plant, z, u, p, dt, exact=bool(tableau.e))
     if fric:
         base = Plant(plant.params.without_effect("dry_friction"))
         idx = [plant.param_index(n) for n in base.param_names]
@@ -209,15 +224,17 @@ def _one_step(plant: Plant, h: float, substeps: int = 1, name: str = "engine_ste
         ev[iv] = 1.0
         ev = ca.DM(ev)
 
+        base_f = _split_spool(base, z, u, pb, dt, bool(tableau.e), zs)[1]  # (as the step)
+
         def drive(zz):
             """Every force on the piston but friction, at rest (N)."""
             z_rest = ca.vertcat(*[0.0 if i == iv else zz[i] for i in range(nx)])
-            return m * base.f(z_rest, u, pb)[iv]
+            return m * base_f(z_rest)[iv]
 
         def rates(zz, direction):
             level = stribeck_level(zz[iv], fc, fs, vs)
-            return base.f(zz, u, pb) - ev * (direction * level / m)
-    zk = z                      # one step, from the symbolic state
+            return base_f(zz) - ev * (direction * level / m)
+    zk = zs                     # one step, from the symbolic state
     if fric:
         v0 = zk[iv]
         f_drive = drive(zk)
@@ -228,8 +245,7 @@ def _one_step(plant: Plant, h: float, substeps: int = 1, name: str = "engine_ste
             r_ = rates(zz, direction)
             return r_ - ev * (stuck * r_[iv])      # a stuck piston's velocity stays 0
     else:
-        def f_of(zz):
-            return plant.f(zz, u, p)
+        f_of = plant_f
     fz = f_of(zk)
     J = ca.jacobian(fz, zk)
     growth = ca.mmax(ca.diag(J))         # 1/s: fastest growing mode, left explicit in W
@@ -258,7 +274,27 @@ def _one_step(plant: Plant, h: float, substeps: int = 1, name: str = "engine_ste
         inexact = ca.logic_or(inexact, ca.logic_or(breaks, ca.logic_and(crossed,
                                                                         ca.logic_not(held))))
         zn = ca.if_else(ca.logic_or(stuck, ca.logic_and(crossed, held)), z_rest, zn)
+    zn, inexact = spool_end(zn, inexact)
     return ca.Function(name, [z, u, p], [zn, inexact])
+
+
+def _split_spool(plant: Plant, z, u, p, dt, exact: bool = True, zs=None):
+    """(zs, f, end) of :func:`workbench.integrate.exact.lag2_split` for the plant's spool
+    lag (``valve_dynamics``), or (z, plant.f, identity) without one or when ``exact`` is
+    False. Why the split: a spool of 200-400 Hz is stepped at h omega 3-5 (2 ms samples),
+    where an order-4 step keeps its mode weakly damped in a wrong phase
+    (:data:`STIFF_LIMIT`) and an order-2 one damps it to the quasi-static limit; its
+    exact motion is right at any bandwidth, so the fitted bandwidth is the recording's,
+    not the step's. ``exact`` False (ROS2, a W-method, whose non-autonomous form is not
+    its autonomous one: 0.6 mm off CVODES at 30 Hz against 0.2 mm with the spool as a
+    state): the spool is an ordinary state. ``zs`` given: reuse it (the friction law's
+    rates of the same step)."""
+    if not (exact and plant.params.has_effect("valve_dynamics")):
+        return z, (lambda zz: plant.f(zz, u, p)), (lambda zz, flag: (zz, flag))
+    pv = {n: p[i] for i, n in enumerate(plant.param_names)}
+    return lag2_split(lambda zz: plant.f(zz, u, p), z, plant.state_index("spool"),
+                      plant.state_index("spool_rate"), u, pv["valve.bandwidth"],
+                      pv["valve.damping"], dt, zs)
 
 
 def _error_too_large(plant: Plant, err):
@@ -320,7 +356,10 @@ def _project(plant: Plant, z):
 
 def _guarded_step(plant: Plant, h: float, substeps: int, tableau=TABLEAU) -> ca.Function:
     """(z_{k+1}, inexact) over one sample, given ``refine`` (0 or 1): ``substeps`` :data:`TABLEAU`
-    steps, or :data:`REFINE` times as many where ``refine`` is 1 (evaluated only then).
+    steps, or steps of h / :data:`REFINE` where ``refine`` is 1 (evaluated only then;
+    the plain steps where they are that small already: a friction event or an end stop
+    asks for a step of that size, not for REFINE times the sized steps, which would put
+    48 unrolled steps of a lined plant into the compiled code).
 
     Where the step leaves the physically possible states (:func:`_implausible`: at an
     end stop the chamber shrinks to its dead volume and its pressure time constant to
@@ -344,9 +383,10 @@ def _guarded_step(plant: Plant, h: float, substeps: int, tableau=TABLEAU) -> ca.
     cost jumps: the refits then fitted the static friction 7.7 % low)."""
     nx, npar = len(plant.states), len(plant.p0)
     coarse_one = _one_step(plant, h, substeps, "step_coarse", tableau)
-    fine_one = _one_step(plant, h, substeps * REFINE, "step_fine", tableau)
+    n_fine = max(REFINE, substeps)     # steps of at most h/REFINE, never coarser than the plain
+    fine_one = _one_step(plant, h, n_fine, "step_fine", tableau)
     coarse = coarse_one if substeps == 1 else _repeated(coarse_one, substeps, nx, npar)
-    fine = _repeated(fine_one, substeps * REFINE, nx, npar)
+    fine = _repeated(fine_one, n_fine, nx, npar)
     zm, um, pm = ca.MX.sym("z", nx), ca.MX.sym("u"), ca.MX.sym("p", npar)
     refine = ca.MX.sym("refine")
     zc, inexact = coarse(zm, um, pm)
@@ -360,15 +400,42 @@ def _guarded_step(plant: Plant, h: float, substeps: int, tableau=TABLEAU) -> ca.
 
 
 def stiff_substeps(plant: Plant, h: float) -> int:
-    """Steps per engine sample of ``h`` s so that h/n x |lambda| <= :data:`STIFF_LIMIT`
-    for the fastest mode lambda of the plant's lines and spool.
+    """Steps per engine sample of ``h`` s for the plant's lines and spool lag: the more
+    of :func:`line_substeps` (h/n x |lambda| <= :data:`STIFF_LIMIT` for the lines'
+    fastest mode) and, with a spool lag, h/n x 2 pi f <= :data:`SPOOL_LIMIT` for the
+    larger of its bandwidth f and the spool candidate's bound
+    (:data:`.candidates.SPOOL_BANDWIDTH_MAX`, 400 Hz: a fit may move there from any
+    start, and the count is fixed per engine).
 
-    |lambda| is the spectral radius of the line and spool states' own block of df/dz
+    The spool itself is stepped exactly (:func:`_split_spool`); what the steps must
+    resolve is its motion as the valve sees it at the stages. Measured (x rms against
+    CVODES over 0.2 s from the true state, a 2 ms sample at a full valve opening, 25 mm
+    rig; the same without a spool: 2.0 um): at one step per sample 5.1 / 3.5 / 17 /
+    42 um for 30 / 100 / 222 / 400 Hz (h omega 0.4-5.0), at two 1.3 / 0.8 / 1.3 / 3.5 um
+    (ROS2 at one step, the method until session 11: 150-590 um).
+
+    Parameters
+    ----------
+    plant : the plant (its parameter values set the rates).
+    h : engine sample period, s.
+    """
+    n = line_substeps(plant, h)
+    if plant.params.has_effect("valve_dynamics"):
+        f = max(float(plant.params["valve.bandwidth"]), SPOOL_BANDWIDTH_MAX)
+        n = max(n, int(math.ceil(h * 2.0 * math.pi * f / SPOOL_LIMIT - 1e-9)))
+    return max(n, 1)
+
+
+def line_substeps(plant: Plant, h: float) -> int:
+    """Steps per engine sample of ``h`` s so that h/n x |lambda| <= :data:`STIFF_LIMIT`
+    for the fastest mode lambda of the plant's lines (1 without lines).
+
+    |lambda| is the spectral radius of the line states' own block of df/dz
     (the chambers and the piston held) at mid-stroke with the chambers at rest, the
     valve closed or fully open either way: the fastest acoustic mode of a segment
     (about 2 a / segment length, a the speed of sound), the filling of a line's first
-    node through the open valve (its volume against the valve's conductance), a spool's
-    bandwidth. These are the oscillatory and valve-driven modes a step must resolve
+    node through the open valve (its volume against the valve's conductance).
+    These are the oscillatory and valve-driven modes a step must resolve
     (a step at h |lambda| of 2-10 keeps their phase wrong rather than damping them:
     :data:`STIFF_LIMIT`); the chambers' own stiff modes (a leak's steep slope at equal
     pressures, a chamber at its dead volume) are real and damped, which the L-stable
@@ -376,7 +443,7 @@ def stiff_substeps(plant: Plant, h: float) -> int:
     recording's: the count is fixed for an engine, so every replay of a fit is stepped
     alike (a fit that moves far from its start, e.g. to a much shorter line, is stepped
     as its start was). Measured: 1 for the plant without lines or with 3.62 m of
-    3.6 mm tubing in the diagnosis's 3 segments (550 1/s), 3 for 1 m in 3 segments
+    3.6 mm tubing in 3 segments (550 1/s), 3 for 1 m in 3 segments
     (1990 1/s), 5-8 for the plant files' default of a segment per 0.25 m.
 
     Parameters
@@ -384,7 +451,7 @@ def stiff_substeps(plant: Plant, h: float) -> int:
     plant : the plant (its parameter values set the rates).
     h : engine sample period, s.
     """
-    idx = [i for i, sig in enumerate(plant.states) if sig.part in ("line", "valve")]
+    idx = [i for i, sig in enumerate(plant.states) if sig.part == "line"]
     if not idx:
         return 1
     nx = len(plant.states)
@@ -419,7 +486,7 @@ class Engine:
     substeps : least number of steps per sample; with ROS4, more when the plant's
         fastest mode asks for them (:func:`stiff_substeps`: long lines, a fast spool).
     tableau : the Rosenbrock method (default :data:`TABLEAU`, :data:`LINE_TABLEAU` for
-        a plant with line dynamics or a spool lag).
+        a plant with line dynamics).
     jit : compile to C when a compiler is present.
     rates : also return the model's rates (observer passes).
     """
@@ -434,7 +501,7 @@ class Engine:
         nx = len(plant.states)
         npar = len(plant.p0)
         if tableau is None:
-            fast = any(sig.part in ("line", "valve") for sig in plant.states)
+            fast = any(sig.part == "line" for sig in plant.states)
             tableau = LINE_TABLEAU if fast else TABLEAU
         if tableau.e:            # a method that resolves the modes it steps: size its steps
             substeps = max(int(substeps), stiff_substeps(plant, self.h))
