@@ -534,3 +534,60 @@ def test_fl_breakaway_probe_keeps_the_force_overshoot_to_a_share_of_the_stribeck
     assert breakaway_probe(flat, lam, q) == 1.0
     with pytest.raises(InputError, match="probe"):
         replace(fl, probe=0.0)
+
+
+def test_fl_release_adds_the_force_rate_to_the_sliding_need_after_a_break_away():
+    # release samples = the lines' round trip 2 L / c in samples: 1 m at 20 degC,
+    # c = sqrt(1.4 R T) = 343 m/s, 5.83 ms over 2 ms -> 3; without lines one sample
+    from dataclasses import replace
+    from workbench.controllers.design import release_samples
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    c = math.sqrt(1.4 * 287.0 * 293.15)
+    assert release_samples(plant, 0.002) == math.ceil(2.0 / c / 0.002) == 3
+    assert release_samples(Plant.from_toml(PLANTS / "rig25_mpye.toml"), 0.002) == 1
+    fl = design(plant, "fl", jit=False).inner.inner
+    assert fl.release == 3
+    with pytest.raises(InputError, match="release"):
+        replace(fl, release=-1)
+    # a stuck piston the reference moves on (+x), then a quantum of travel: the
+    # sample that sees it adds (F_need - F) / (3 T) of force rate to the law's
+    # command; F_need = F_c + m (a_r + (k1 e1 + k0 e0) / k2) + beta v, computed here
+    m = fl.model
+    T = fl.sample_time
+    q = 0.5 / 4096
+    p_a, p_b = 4.6e5, 4.0e5                       # 29.5 N: past the 25 N static friction
+    x0 = 0.25
+    y_stuck = {"x": x0, "v": 0.0, "p_a": p_a, "p_b": p_b, "d": 25.0, "x_measured": x0}
+    from workbench import references
+    p = references.profile([(0.0, x0), (0.01, x0), (0.2, x0 + 0.01)])
+    traj = references.smooth(references.Reference(p.times, p.values), 0.2, 5.0, 500.0)
+    with_release, without = replace(fl, preview=traj), replace(fl, preview=traj, release=0)
+    t_move = next(t for t in np.arange(0.0, 0.2, T) if traj.derivatives(t)[1] > 0.011)
+    y_moved = dict(y_stuck, x=x0 + q, v=0.03, x_measured=x0 + q)
+    out = []
+    for law in (with_release, without):
+        state = (None, 0.0, 0.0, None, t_move, None)    # reset(), at t_move
+        state, _ = law.update(state, x0, y_stuck)          # break-away state entered
+        assert state[5][2] is not None and state[5][2][0] == 1.0
+        state, u = law.update(state, x0, y_moved)          # moved: broke away
+        out.append((state, u))
+    (st_r, u_r), (st_0, u_0) = out
+    assert st_r[5][2][1] is None and st_0[5][2] is None      # release under way / none
+    tt = t_move + T
+    r, r1, r2, _ = (float(v) for v in traj.derivatives(tt))
+    g = fl.gains
+    acc = r2 + (g["k1"] * (r1 - 0.03) + g["k0"] * (r - (x0 + q))) / g["k2"]
+    need = 15.0 + 1.2 * acc + 40.0 * 0.03
+    F = (p_a - p_b) * float(plant.area_a)
+    rate = (need - F) / (3 * T)
+    assert rate < -1e3                                   # the excess comes down
+    dG = (float(m.gamma_for_force_rate(rate, x0 + q, 0.03, p_a, p_b))
+          - float(m.gamma_for_force_rate(0.0, x0 + q, 0.03, p_a, p_b)))
+    assert st_r[5][2][3] == pytest.approx(rate, rel=1e-9)
+    # the same law otherwise: u without release is the valve's command for some G0,
+    # with release the command for G0 + dG (G0 found by bisection on the valve law)
+    from scipy.optimize import brentq
+    g0 = brentq(lambda g: float(m.valve.command_for_gamma(g, "a")[0]) - u_0, -0.99, 0.99,
+                xtol=1e-12)
+    assert dG < -0.02
+    assert u_r == pytest.approx(float(m.valve.command_for_gamma(g0 + dG, "a")[0]), abs=1e-6)

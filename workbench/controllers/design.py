@@ -65,7 +65,7 @@ from .hold import hold_for_plant
 from .observer import Observed, kalman_observer
 
 __all__ = ["design", "axis_limits", "AxisLimits", "KINDS", "VelocityPID", "line_flow", "line_delay",
-           "breakaway_jump", "breakaway_probe"]
+           "breakaway_jump", "breakaway_probe", "release_samples"]
 
 KINDS = ("pid", "fl", "nmpc")
 #: m/s: speed below which a piston in the lock band is held by closing the valve
@@ -515,7 +515,8 @@ def _law(plant, kind: str, T: float, preview, q: float, bandwidth, jit: bool,
         if fr is None:
             return fl
         return replace(fl, friction=fr, friction_lag=estimate_lag,
-                       probe=breakaway_probe(plant, fl.bandwidth, q))
+                       probe=breakaway_probe(plant, fl.bandwidth, q),
+                       release=release_samples(plant, T))
     # no friction feedforward: FL's (the plant file's friction at the reference's
     # velocity handed over to the observer's estimate) made this loop hunt in its holds
     # (precision profile --quick: 300 command changes, 5 mm peak-to-peak)
@@ -636,6 +637,15 @@ def _fl_bandwidth(T: float, line_delay: float = 0.0,
     delay = 0.5 * T + max(float(line_delay), 0.0)
     return float(min(0.8 * SAMPLING_LIMIT / T, 0.5 * SAMPLING_LIMIT / delay,
                      observer_bandwidth / 3.0))
+
+
+def release_samples(plant, T: float) -> int:
+    """Samples of FL's break-away release (:meth:`~.feedback_linearizing.
+    FeedbackLinearizing._release`): the lines' round trip 2 L / c (:func:`line_delay`)
+    in samples, at least one: a force change sent into a line is felt whole at the
+    chamber only after its reflection has come back (the hold's pulse half,
+    :mod:`~.hold`, is sized the same way; 3 samples on the precision rig)."""
+    return max(1, int(math.ceil(2.0 * line_delay(plant) / T - 1e-9)))
 
 
 def line_delay(plant) -> float:
