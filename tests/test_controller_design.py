@@ -591,3 +591,36 @@ def test_fl_release_adds_the_force_rate_to_the_sliding_need_after_a_break_away()
                 xtol=1e-12)
     assert dG < -0.02
     assert u_r == pytest.approx(float(m.valve.command_for_gamma(g0 + dG, "a")[0]), abs=1e-6)
+
+
+def test_pid_drives_a_stuck_piston_in_the_lines_round_trip_and_releases_after():
+    # design: the stuck piston's drive to F_s in the lines' round trip (3 samples of
+    # 2 ms), below 1/w0; the release over the same 3 samples
+    from dataclasses import replace
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    pid = design(plant, "pid", jit=False).inner.inner
+    assert pid.release == 3
+    assert pid.breakaway_time == pytest.approx(0.006, rel=1e-12) and pid.force_time > 0.006
+    c = pid.force_rate
+    # stuck, moving on (+x): (F_s + m r2 + beta r1 - F) / (c tau_b), tau_b = 6 ms
+    x0, q = 0.25, 0.5 / 4096
+    y = {"x": x0, "v": 0.0, "a": 0.0, "d": 20.0, "x_measured": x0}
+    r1, r2 = 0.03, 0.5
+    slope_term = float(pid.friction.slope(r1)) * r2 / c
+    u, brk = pid._friction((1.0, x0), x0, r1, r2, y, 1.0)
+    assert brk == (1.0, x0)
+    assert u - slope_term == pytest.approx((25.0 + 1.2 * r2 + 40.0 * r1 - 20.0) / (c * 0.006),
+                                           rel=1e-9)
+    # the sample that sees a quantum of travel: force 27 N; the release adds
+    # (F_c + m r2 + beta r1 - F) / (c 3 T) on top of the hand-back's (.. - F) / (c / w0)
+    y_moved = dict(y, x=x0 + q, x_measured=x0 + q, v=0.02, d=27.0 - 40.0 * 0.02)
+    want = 15.0 + 1.2 * r2 + 40.0 * r1
+    u_r, rel = pid._friction((1.0, x0), x0, r1, r2, y_moved, 1.0)
+    u_0, _ = replace(pid, release=0)._friction((1.0, x0), x0, r1, r2, y_moved, 1.0)
+    assert rel[1] is None and rel[0] == 1.0
+    assert u_r - u_0 == pytest.approx((want - 27.0) / (c * 0.006), rel=1e-9)
+    assert u_0 - slope_term == pytest.approx((want - 27.0) / (c * pid.force_time), rel=1e-9)
+    # the release lasts 3 samples: still on at 1.004 s, off at 1.006 s
+    u_on, _ = pid._friction(rel, x0, r1, r2, y_moved, 1.004)
+    u_off, _ = pid._friction(rel, x0, r1, r2, y_moved, 1.006)
+    assert u_on - u_off == pytest.approx((want - 27.0) / (c * 0.006), rel=1e-9)
