@@ -260,16 +260,14 @@ class VelocityPID:
         0.41 / 0.37 -> 0.48 / 0.59 mm; on the foreign LuGre rig 0.003 -> 0.54 mm).
         Precision sine (seed 0) 3.22 -> 1.87 mm; test profile seeds 0-1 3.49 / 3.44
         -> 2.15 / 1.88 mm, steady state and holds as before.
-        (4) :func:`design` drives a stuck piston to F_s in the lines' round trip
-        (``breakaway_time``, :func:`release_samples`: 6 ms on the precision rig),
-        not in 1/w0 (25 ms: stuck 70 ms at the sine's start, 1.8 mm behind), and
-        on the sample that sees the break-away adds for ``release`` samples the
-        command that takes the force to the sliding need in that time (as FL's
-        :meth:`~.feedback_linearizing.FeedbackLinearizing._release`). Test
-        profile seeds 0-4, sine worst 2.16/1.88/1.87/2.15/2.21 -> 1.17/1.81/1.44/
-        1.43/1.32 mm (the drive alone 1.69/1.51/1.74/1.38/1.44), steady state
-        worst 0.27-0.44 -> 0.18-0.30 mm; the first step's hold pulses on every seed
-        (was two of five).
+        (4) Optional (off in :func:`design`): ``breakaway_time`` drives a stuck
+        piston to F_s faster than 1/w0, and ``release`` adds, on the sample that
+        sees the break-away and for that many samples, the command that takes an
+        excess force to the sliding need (as FL's :meth:`~.feedback_linearizing.
+        FeedbackLinearizing._release`). With both at the lines' round trip (6 ms,
+        3 samples) the test profile's sine (seeds 0-4) went 2.16/1.88/1.87/2.15/
+        2.21 -> 0.98/0.98/1.44/1.36/1.32 mm, but the precision sine started 0.3 s
+        after rest went 1.87 -> 3.82 mm (drive at 12 / 25 ms: 1.79 / 1.99 mm).
         """
         from .feedback_linearizing import breakaway, fed_friction
         fr, c = self.friction, self.force_rate
@@ -298,8 +296,9 @@ class VelocityPID:
         if was is not None:
             n = self.release * self.sample_time
             want = was[0] * fr.coulomb + self.mass * r2 + self.viscous * r1
+            excess = min(was[0] * (want - force), 0.0) * was[0]     # an excess only
             rel = (was[0], None, t + 3.0 * self.force_time, t + n - 0.5 * self.sample_time,
-                   (want - force) / (c * n) if n > 0 else 0.0)
+                   excess / (c * n) if n > 0 else 0.0)
         if rel is not None and t < rel[2] and r1 * rel[0] > 0:
             want = rel[0] * fr.coulomb + self.mass * r2 + self.viscous * r1
             pulse = len(rel) > 3 and t < rel[3]
@@ -631,9 +630,7 @@ def _pid(plant, T: float, preview, q: float) -> VelocityPID:
                        integral_zone=limit / kp, integral_limit=limit,
                        friction=FrictionModel.from_plant(plant), force_rate=m * kv * w2,
                        mass=m, viscous=float(prm["load.viscous_friction"]), loop_gain=k0,
-                       force_time=1.0 / red.w0,
-                       breakaway_time=min(1.0 / red.w0, release_samples(plant, T) * T),
-                       release=release_samples(plant, T))
+                       force_time=1.0 / red.w0)
 
 
 def _fl_bandwidth(T: float, line_delay: float = 0.0,
