@@ -19,6 +19,7 @@ peak-to-peak and the command changes of a limit cycle).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -124,3 +125,74 @@ def holds(run_: LoopRun, quantum: float, min_duration=0.5, settle=0.5, lead=0.0)
                     "command_changes": int(np.sum(np.abs(np.diff(us)) > 1e-2)),
                     "quantum": quantum})
     return out
+
+
+# ---------------------------------------------------------------------- rigs unlike ours
+#: The precision rig's plant file, the base of the files below.
+PRECISION = Path(__file__).resolve().parents[1] / "designs" / "plants" / "rigs" / "precision_rig25.toml"
+
+#: Foreign rigs that differ from the workbench's plant files as real rigs do, each as
+#: (the plant file a user would have: changes to PRECISION's keys, what the rig really
+#: is: changes to that file's values, the rig's friction law and line model, position
+#: ADC bits). Keys are the plant file's dotted keys.
+FOREIGN_RIGS = {
+    # a larger bore on a shorter stroke with a heavier carriage and shorter lines;
+    # the user's file is 5-10 % off the rig on mass, supply and valve conductance
+    # (the rig: mass +8 %, supply -6 %, conductance -8 %), friction a smooth Stribeck
+    # curve (no stiction plateau), lines as 5 pi-segments
+    "bore32": ({"name": "foreign-bore32", "cylinder.bore": 0.032, "cylinder.stroke": 0.2, "load.mass": 2.0,
+                "friction.coulomb": 22.0, "friction.static": 34.0, "lines.length": 0.6,
+                "controller.position_resolution": 0.2 / 4096},
+               {"load.mass": 2.16, "supply.pressure": 5.64e5,
+                "valve.sonic_conductance": 0.92 * 6.25e-8},
+               "smooth", "pi5", 12),
+    # the precision rig with a 5 % spool overlap (in its file too), a 10-bit position
+    # sensor (0.49 mm over 0.5 m), LuGre friction 20 % above the file's and the
+    # coarse lumped line model
+    "overlap5_10bit": ({"name": "foreign-overlap5-10bit", "valve.deadband": 0.05,
+                        "controller.position_resolution": 0.5 / 1024},
+                       {"friction.coulomb": 18.0, "friction.static": 30.0},
+                       "lugre", "lumped", 10),
+}
+
+
+def write_plant(path, changes: dict, base=PRECISION) -> Path:
+    """Write ``base`` with ``changes`` (dotted keys -> numbers) to ``path`` as a plant
+    file (TOML of flat sections; comments dropped)."""
+    import tomllib
+    doc = tomllib.loads(Path(base).read_text(encoding="utf-8"))
+    for key, value in changes.items():
+        if "." not in key:
+            doc[key] = value
+            continue
+        sec, name = key.split(".", 1)
+        doc.setdefault(sec, {})[name] = value
+    lines = []
+    for sec, tab in doc.items():
+        if not isinstance(tab, dict):
+            lines.append(f"{sec} = {tab!r}" if not isinstance(tab, str) else f'{sec} = "{tab}"')
+    for sec, tab in doc.items():
+        if isinstance(tab, dict):
+            lines.append(f"\n[{sec}]")
+            for k, v in tab.items():
+                lines.append(f'{k} = "{v}"' if isinstance(v, str) else f"{k} = {v!r}")
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return Path(path)
+
+
+def foreign_rig(name: str, directory):
+    """(plant file path the user has, the ForeignRig, position bits) of FOREIGN_RIGS[name];
+    the plant file is written into ``directory``."""
+    file_changes, truth, law, line_model, bits = FOREIGN_RIGS[name]
+    path = write_plant(Path(directory) / f"{name}.toml", file_changes)
+    return path, rig_for(path, law=law, line_model=line_model, overrides=truth), bits
+
+
+def step_profile(stroke: float, hold: float = 1.5, lead: float = 0.3):
+    """Two steps of 12 % of the stroke about mid-stroke (60 mm on 0.5 m, the precision
+    profile's scaling) and back, each held ``hold`` s; (Reference, duration s)."""
+    from workbench import references
+    c, h = 0.5 * stroke, 0.12 * stroke
+    p = references.profile([(0, c), (lead, c), (lead, c + h), (lead + hold, c + h),
+                            (lead + hold, c), (lead + 2 * hold, c)])
+    return references.Reference(p.times, p.values), lead + 2 * hold

@@ -534,3 +534,94 @@ def test_fl_breakaway_probe_keeps_the_force_overshoot_to_a_share_of_the_stribeck
     assert breakaway_probe(flat, lam, q) == 1.0
     with pytest.raises(InputError, match="probe"):
         replace(fl, probe=0.0)
+
+
+def test_fl_release_adds_the_force_rate_to_the_sliding_need_after_a_break_away():
+    # release samples = the lines' round trip 2 L / c in samples: 1 m at 20 degC,
+    # c = sqrt(1.4 R T) = 343 m/s, 5.83 ms over 2 ms -> 3; without lines one sample
+    from dataclasses import replace
+    from workbench.controllers.design import release_samples
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    c = math.sqrt(1.4 * 287.0 * 293.15)
+    assert release_samples(plant, 0.002) == math.ceil(2.0 / c / 0.002) == 3
+    assert release_samples(Plant.from_toml(PLANTS / "rig25_mpye.toml"), 0.002) == 1
+    fl = design(plant, "fl", jit=False).inner.inner
+    assert fl.release == 3
+    with pytest.raises(InputError, match="release"):
+        replace(fl, release=-1)
+    # a stuck piston the reference moves on (+x), then a quantum of travel: the
+    # sample that sees it adds (F_need - F) / (3 T) of force rate to the law's
+    # command; F_need = F_c + m (a_r + (k1 e1 + k0 e0) / k2) + beta v, computed here
+    m = fl.model
+    T = fl.sample_time
+    q = 0.5 / 4096
+    p_a, p_b = 4.6e5, 4.0e5                       # 29.5 N: past the 25 N static friction
+    x0 = 0.25
+    y_stuck = {"x": x0, "v": 0.0, "p_a": p_a, "p_b": p_b, "d": 25.0, "x_measured": x0}
+    from workbench import references
+    p = references.profile([(0.0, x0), (0.01, x0), (0.2, x0 + 0.01)])
+    traj = references.smooth(references.Reference(p.times, p.values), 0.2, 5.0, 500.0)
+    with_release, without = replace(fl, preview=traj), replace(fl, preview=traj, release=0)
+    t_move = next(t for t in np.arange(0.0, 0.2, T) if traj.derivatives(t)[1] > 0.011)
+    y_moved = dict(y_stuck, x=x0 + q, v=0.03, x_measured=x0 + q)
+    out = []
+    for law in (with_release, without):
+        state = (None, 0.0, 0.0, None, t_move, None)    # reset(), at t_move
+        state, _ = law.update(state, x0, y_stuck)          # break-away state entered
+        assert state[5][2] is not None and state[5][2][0] == 1.0
+        state, u = law.update(state, x0, y_moved)          # moved: broke away
+        out.append((state, u))
+    (st_r, u_r), (st_0, u_0) = out
+    assert st_r[5][2][1] is None and st_0[5][2] is None      # release under way / none
+    tt = t_move + T
+    r, r1, r2, _ = (float(v) for v in traj.derivatives(tt))
+    g = fl.gains
+    acc = r2 + (g["k1"] * (r1 - 0.03) + g["k0"] * (r - (x0 + q))) / g["k2"]
+    need = 15.0 + 1.2 * acc + 40.0 * 0.03
+    F = (p_a - p_b) * float(plant.area_a)
+    rate = (need - F) / (3 * T)
+    assert rate < -1e3                                   # the excess comes down
+    dG = (float(m.gamma_for_force_rate(rate, x0 + q, 0.03, p_a, p_b))
+          - float(m.gamma_for_force_rate(0.0, x0 + q, 0.03, p_a, p_b)))
+    assert st_r[5][2][3] == pytest.approx(rate, rel=1e-9)
+    # the same law otherwise: u without release is the valve's command for some G0,
+    # with release the command for G0 + dG (G0 found by bisection on the valve law)
+    from scipy.optimize import brentq
+    g0 = brentq(lambda g: float(m.valve.command_for_gamma(g, "a")[0]) - u_0, -0.99, 0.99,
+                xtol=1e-12)
+    assert dG < -0.02
+    assert u_r == pytest.approx(float(m.valve.command_for_gamma(g0 + dG, "a")[0]), abs=1e-6)
+
+
+def test_pid_can_drive_a_stuck_piston_in_the_lines_round_trip_and_release_after():
+    # the stuck piston's drive to F_s in the lines' round trip (3 samples of 2 ms),
+    # below 1/w0; the release over the same 3 samples (options, off in design)
+    from dataclasses import replace
+    plant = Plant.from_toml(PLANTS / "rigs" / "precision_rig25.toml")
+    base = design(plant, "pid", jit=False).inner.inner
+    assert base.release == 0 and base.breakaway_time == 0.0      # off in design
+    pid = replace(base, release=3, breakaway_time=0.006)
+    assert pid.force_time > 0.006
+    c = pid.force_rate
+    # stuck, moving on (+x): (F_s + m r2 + beta r1 - F) / (c tau_b), tau_b = 6 ms
+    x0, q = 0.25, 0.5 / 4096
+    y = {"x": x0, "v": 0.0, "a": 0.0, "d": 20.0, "x_measured": x0}
+    r1, r2 = 0.03, 0.5
+    slope_term = float(pid.friction.slope(r1)) * r2 / c
+    u, brk = pid._friction((1.0, x0), x0, r1, r2, y, 1.0)
+    assert brk == (1.0, x0)
+    assert u - slope_term == pytest.approx((25.0 + 1.2 * r2 + 40.0 * r1 - 20.0) / (c * 0.006),
+                                           rel=1e-9)
+    # the sample that sees a quantum of travel: force 27 N; the release adds
+    # (F_c + m r2 + beta r1 - F) / (c 3 T) on top of the hand-back's (.. - F) / (c / w0)
+    y_moved = dict(y, x=x0 + q, x_measured=x0 + q, v=0.02, d=27.0 - 40.0 * 0.02)
+    want = 15.0 + 1.2 * r2 + 40.0 * r1
+    u_r, rel = pid._friction((1.0, x0), x0, r1, r2, y_moved, 1.0)
+    u_0, _ = replace(pid, release=0)._friction((1.0, x0), x0, r1, r2, y_moved, 1.0)
+    assert rel[1] is None and rel[0] == 1.0
+    assert u_r - u_0 == pytest.approx((want - 27.0) / (c * 0.006), rel=1e-9)
+    assert u_0 - slope_term == pytest.approx((want - 27.0) / (c * pid.force_time), rel=1e-9)
+    # the release lasts 3 samples: still on at 1.004 s, off at 1.006 s
+    u_on, _ = pid._friction(rel, x0, r1, r2, y_moved, 1.004)
+    u_off, _ = pid._friction(rel, x0, r1, r2, y_moved, 1.006)
+    assert u_on - u_off == pytest.approx((want - 27.0) / (c * 0.006), rel=1e-9)

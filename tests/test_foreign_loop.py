@@ -105,3 +105,101 @@ def test_fl_lands_near_its_targets_on_the_smooth_friction_lumped_line_rig(fl_smo
     errors = [h["steady_state_error"] for holds in runs for h in holds]
     assert len(errors) == 4
     assert np.mean(errors) < 0.5e-3, errors
+
+
+# ------------------------------------------------------------ rigs unlike our plant files
+# Each designed controller (design(plant, kind), the plant file only) on the rigs of
+# foreign_loop.FOREIGN_RIGS: a 32 mm bore, 200 mm stroke, 2 kg rig whose file is 5-10 %
+# off (mass, supply, valve conductance) with smooth Stribeck friction and 5-segment
+# lines; the precision rig with a 5 % spool overlap, a 10-bit position sensor, LuGre
+# friction 20 % above its file and one lumped line section. Two steps of 12 % of the
+# stroke, each held 1.5 s; sensor seed 0; the NMPC in CasADi's VM (jit=False: the
+# same law as compiled).
+FOREIGN_KINDS = ("pid", "fl", "nmpc")
+
+
+@pytest.fixture(scope="module")
+def foreign_runs(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("foreign_rigs")
+    out = {}
+    for name in fl.FOREIGN_RIGS:
+        path, rig, bits = fl.foreign_rig(name, directory)
+        plant = Plant.from_toml(path)
+        ref, duration = fl.step_profile(plant.stroke)
+        q = plant.stroke / 2 ** bits
+        for kind in FOREIGN_KINDS:
+            ctrl = design(plant, kind, reference=ref, quantum=q, pressure_noise=300.0, jit=False)
+            res = fl.run(ctrl, rig, ref, duration, seed=0, position_bits=bits)
+            out[name, kind] = (res, fl.holds(res, q, lead=ctrl.inner.lead), q, plant,
+                               ctrl.inner.hold.range, rig)
+    return out
+
+
+def test_the_foreign_plant_files_are_off_the_rigs_as_stated(foreign_runs):
+    # the user's file: 2.0 kg, 6 bar, C = 6.25e-8; the rig: +8 %, -6 %, -8 %
+    _, _, q, plant, _, rig = foreign_runs["bore32", "pid"]
+    assert plant.stroke == 0.2 and float(plant.area_a) == pytest.approx(math.pi / 4 * 0.032 ** 2)
+    assert float(plant.params["load.mass"]) == 2.0 and rig.m == pytest.approx(2.16)
+    assert rig.P["supply.pressure"] == pytest.approx(0.94 * float(plant.params["supply.pressure"]))
+    assert rig.P["valve.sonic_conductance"] == pytest.approx(
+        0.92 * float(plant.params["valve.sonic_conductance"]))
+    assert q == pytest.approx(0.2 / 4096)
+    _, _, q, plant, _, rig = foreign_runs["overlap5_10bit", "fl"]
+    assert float(plant.params["valve.deadband"]) == 0.05 and q == pytest.approx(0.5 / 1024)
+    assert rig.lugre and (rig.fc, rig.fs) == (18.0, 30.0)      # file: 15 / 25 N
+    assert rig.nodes == 1
+
+
+@pytest.mark.parametrize("kind", FOREIGN_KINDS)
+@pytest.mark.parametrize("name", sorted(fl.FOREIGN_RIGS))
+def test_designed_controllers_stay_within_the_holds_reach_on_foreign_rigs(foreign_runs, name, kind):
+    # no divergence or runaway: the piston inside the stroke, the command inside the
+    # valve's range, each step reached, and from 0.5 s into each hold on the piston
+    # within the range in which the hold takes a stuck piston over (hold_range: 2 mm
+    # or the law's dead zone or the break-away jump): beyond it nothing in the design
+    # would bring it back, within it the hold's pulses do
+    res, holds, q, plant, reach, _ = foreign_runs[name, kind]
+    assert np.all(np.isfinite(res.x)) and res.x.min() > 0 and res.x.max() < plant.stroke
+    assert res.u.min() >= 0.0 and res.u.max() <= 10.0
+    assert len(holds) == 2
+    for h in holds:
+        window = (res.t >= h["start"] + 0.5) & (res.t <= h["end"])
+        worst = np.abs(res.r[window] - res.x[window]).max()
+        assert worst < reach, (name, kind, h, worst, reach)
+
+
+#: Failures of the precision specification on these rigs (sensor seed 0 / 1, measured
+#: on branch h14o, 2026-11-25, holds of h14n's main), for their owners: every one is in a hold's second half.
+#: On the smooth-Stribeck bore32 rig (no stiction plateau: a piston under any net force
+#: creeps, 1 mm/s at 10 N) the hold pulses through its second half; on the 10-bit
+#: LuGre rig the PID arrives 2.4 mm short (its dead zone in the 5 % overlap's residual
+#: is 5.7 mm: the hold finishes every PID move) and the hold's pulses, judged in 0.49
+#: mm quanta, took > 1 s and one jumped 2.9 mm past the target.
+FOREIGN_SPEC_FAILS = {
+    ("bore32", "pid"): "hold 1 hunts: 0.235 / 0.044 mm (q 0.049 mm), 52 / 0 command changes, "
+                       "0.99 mm p-p (seed 0); seed 1 0.10 / 0.18 mm, 46 / 7 changes",
+    ("bore32", "fl"): "hold 1 pulses: 0.022 / 0.014 mm, 9 / 0 command changes, 0.12 mm p-p "
+                      "(seed 0); seed 1 51 / 7 changes",
+    ("bore32", "nmpc"): "steady state within a quantum (0.014 / 0.018 mm) but 7 / 17 command "
+                        "changes, 0.033 / 0.052 mm p-p (q 0.049 mm) in the holds' second halves",
+    ("overlap5_10bit", "pid"): "PID arrives 2.4 mm short, the hold's pulses leave 0.79 / 1.91 "
+                               "mm (q 0.49 mm), 36 / 44 command changes, 1.5 / 3.2 mm p-p",
+    ("overlap5_10bit", "fl"): "FL arrives 0.6 mm short, hold 1 pulsed: 0.50 / 0.22 mm, 26 / 4 "
+                              "command changes, 2.2 / 0.11 mm p-p",
+}
+
+
+@pytest.mark.parametrize("kind", FOREIGN_KINDS)
+@pytest.mark.parametrize("name", sorted(fl.FOREIGN_RIGS))
+def test_designed_controllers_meet_the_precision_holds_on_foreign_rigs(foreign_runs, name, kind,
+                                                                       request):
+    # the precision specification's holds: steady state (last 0.5 s) within one
+    # position quantum, and at rest over the hold's second half (within a quantum,
+    # at most the two command changes of the valve closing once)
+    if (name, kind) in FOREIGN_SPEC_FAILS:
+        request.applymarker(pytest.mark.xfail(reason=FOREIGN_SPEC_FAILS[name, kind],
+                                              strict=False))
+    _, holds, q, _, _, _ = foreign_runs[name, kind]
+    for h in holds:
+        assert h["steady_state_error"] <= q, holds
+        assert h["peak_to_peak"] <= q and h["command_changes"] <= 2, holds
