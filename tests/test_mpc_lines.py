@@ -137,6 +137,18 @@ def test_lumped_lines_keep_the_command_activity_on_the_sine_bounded(lined):
     assert max(h["steady_state_error"] for h in steps) <= lined.quantum
 
 
+def _open_loop_states(rig, T, n):
+    """States of ``rig`` at ``n`` samples of ``T`` s under a random command held 5 samples.
+
+    Steps of +-1 V about 5 V (seed 2), from rest at mid-stroke, integrated at a tight
+    tolerance (rtol 1e-9), so the recording is the rig's, not the integrator's.
+    """
+    u = np.repeat(5.0 + 1.0 * np.random.default_rng(2).uniform(-1, 1, n // 5), 5)
+    tr = simulate.open_loop(rig, T * np.arange(n), u, x0=rig.initial_state(0.25),
+                            rtol=1e-9, atol=1e-12, progress=False)
+    return np.asarray(tr.states)
+
+
 def test_compiled_line_filter_estimates_as_the_python_filter(plant, monkeypatch):
     # two segments per line (12 states): the compiled sample runs the line filter in C
     # within its one call per sample; each sample's line estimate and covariance must
@@ -153,10 +165,7 @@ def test_compiled_line_filter_estimates_as_the_python_filter(plant, monkeypatch)
     assert pb.nx == 12
     T = fast.sample_time
     n = 30
-    u = np.repeat(5.0 + 1.0 * np.random.default_rng(2).uniform(-1, 1, n // 5), 5)
-    tr = simulate.open_loop(rig, T * np.arange(n), u, x0=rig.initial_state(0.25),
-                            rtol=1e-9, atol=1e-12, progress=False)
-    X = np.asarray(tr.states)
+    X = _open_loop_states(rig, T, n)
     i_q = [4 + i for i, s in enumerate(model.line_states(2)) if s[7] == "q"]
     slow = NMPC.for_plant(rig, jit=False, compiled_sample=False, lines="lumped", horizon=4)
     state, other, moved = None, None, 0.0
@@ -188,10 +197,7 @@ def test_python_update_fails_a_step_with_nan_as_the_compiled_sample(plant, monke
     slow = NMPC.for_plant(rig, jit=False, compiled_sample=False, lines="lumped", horizon=10)
     T = slow.sample_time
     n = 30
-    u = np.repeat(5.0 + 1.0 * np.random.default_rng(2).uniform(-1, 1, n // 5), 5)
-    tr = simulate.open_loop(rig, T * np.arange(n), u, x0=rig.initial_state(0.25),
-                            rtol=1e-9, atol=1e-12, progress=False)
-    X = np.asarray(tr.states)
+    X = _open_loop_states(rig, T, n)
     state, ok = None, []
     for k in range(n):
         state, cmd = slow.update(state, 0.26, dict(zip(NMPC_STATES, X[k, :4])))
