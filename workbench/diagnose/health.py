@@ -31,6 +31,7 @@ import numpy as np
 
 from ..errors import WorkbenchError
 from ..signals import fit
+from .candidates import LINE_SEGMENTS
 from .data import Prepared
 
 __all__ = ["DiagnosisError", "ReplayCheck", "check_replay", "floor_fit", "unexplained", "verdict",
@@ -362,10 +363,11 @@ def _check(prep: Prepared, sim: Mapping[str, np.ndarray]) -> ReplayCheck:
 #: with that finding (the limit, not a missing effect).
 MODEL_FORM = {
     "line_dynamics": (
-        "the line model is the workbench's lumped chain of 3 segments, each segment's "
-        "volume at its valve end: it cannot reproduce a distributed line's wave shape, "
-        "and its fitted length and diameter are the chain's, not the tube's (by a linear "
-        "analysis of this layout, up to 15 % shorter than a distributed line)"),
+        f"the line model is the workbench's lumped chain of {LINE_SEGMENTS} segments, "
+        "each segment's volume at its valve end: it cannot reproduce a distributed "
+        "line's wave shape, and its fitted length and diameter are the chain's, not the "
+        "tube's (by a linear analysis of this layout, up to 15 % shorter than a "
+        "distributed line)"),
     "dry_friction": (
         "the friction law is Karnopp stick-slip with a Stribeck curve: it has no "
         "pre-sliding displacement and no frictional lag (LuGre-type behaviour at "
