@@ -45,7 +45,7 @@ from typing import Any, Mapping
 import tomli_w
 
 from .errors import InputError
-from .params_units import check_units, read_toml, slip_hint
+from .params_units import check_units, quoted_number_hint, read_toml, slip_hint
 
 __all__ = [
     "Key",
@@ -492,8 +492,9 @@ def _check_value(key: Key, raw: Any, source: str) -> Any:
             raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
         return raw
     if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-        raise InputError(f"expected {key.expected()}, got {raw!r} ({type(raw).__name__})",
-                         source=source, location=loc)
+        hint = quoted_number_hint(key.name, key.unit, raw) if isinstance(raw, str) else ""
+        raise InputError(f"expected {key.expected()}, got {raw!r} ({type(raw).__name__})"
+                         + hint, source=source, location=loc)
     if key.kind == "int":
         if not isinstance(raw, int):
             raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)

@@ -225,7 +225,8 @@ class Recording:
             Naming the file, the 1-based line (counting metadata and header lines) and
             column, and the problem.
         """
-        return _checked(*read_csv(Path(path)), **options)
+        return _checked(*read_csv(Path(path), parse_column_map(options.get("columns"))),
+                        **options)
 
     @classmethod
     def from_mat(cls, path: str | os.PathLike[str], **options: Any) -> "Recording":
