@@ -203,3 +203,24 @@ def test_cut_off_mat_file_and_csv_named_mat(tmp_path):
     raw = good.read_bytes()
     _refused(_write(tmp_path, "cut.mat", raw[:len(raw) // 2]), r"probably cut off")
     _refused(_write(tmp_path, "text.mat", CLEAN.read_bytes()), r"rename it to \.csv")
+
+
+def test_windows_1252_file_is_read_with_a_warning(tmp_path):
+    """A Windows logger's export: '\u00b0C' in a unit header and a comment in cp1252. The
+    numbers are ASCII, so the samples are the clean file's; the warning names the
+    first non-UTF-8 byte and its line."""
+    meta, header, rows = _lines()
+    text = "\n".join(meta + ["# Pr\u00fcfstand K\u00f6ln", f"{header},temp [\u00b0C]"]
+                     + [f"{r},21.5" for r in rows]) + "\n"
+    path = _write(tmp_path, "cp1252.csv", text.encode("cp1252"))
+    with pytest.warns(InputWarning, match=rf"not UTF-8 \(byte 0xfc at line {len(meta) + 1}\)"
+                                          r": read as Windows-1252"):
+        rec = load_recording(path)
+    _same_samples(rec)
+    assert "temp [\u00b0C]" in rec.columns
+
+
+def test_binary_file_is_not_read_as_windows_1252(tmp_path):
+    """A spreadsheet saved as .xlsx and renamed .csv (a zip: control bytes)."""
+    path = _write(tmp_path, "sheet.csv", b"PK\x03\x04\x14\x00\x06\x00" + bytes(range(32, 127)))
+    _refused(path, r"not a text file")

@@ -9,6 +9,8 @@ result against the contract of ``formats.md`` section 3 and builds the
 
 from __future__ import annotations
 
+import codecs
+import functools
 import itertools
 import math
 import os
@@ -131,11 +133,68 @@ def _check_file(path: Path) -> None:
 
 def text_encoding(path: Path) -> str:
     """The text encoding to read ``path`` with: UTF-16 when the file starts with its
-    byte-order mark (spreadsheet programs' "Unicode text"), else UTF-8 with an optional
-    BOM ("utf-8-sig")."""
+    byte-order mark (spreadsheet programs' "Unicode text"), UTF-8 with an optional BOM
+    ("utf-8-sig") when the whole file is UTF-8, else Windows-1252, the default of
+    Windows programs in western Europe ("Temp [\xb0C]", "Weg [\xb5m]" in a header or
+    comment). Numbers and the workbench's column names are ASCII, the same in every
+    one of these, so the choice only affects names and comments; :func:`read_csv`
+    says when it read a file as Windows-1252."""
     with open(path, "rb") as fh:
         head = fh.read(2)
-    return "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
+    if head in (b"\xff\xfe", b"\xfe\xff"):
+        return "utf-16"
+    info = path.stat()
+    return "utf-8-sig" if _utf8_error(str(path), info.st_mtime_ns, info.st_size) is None \
+        else "cp1252"
+
+
+@functools.lru_cache(maxsize=8)
+def _utf8_error(path: str, mtime_ns: int, size: int) -> tuple[int, int] | None:  # noqa: ARG001
+    """(offset, line) of the first byte that is not UTF-8, or None for a UTF-8 file.
+    Cached per file version (``mtime_ns``, ``size``): a load asks several times."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    offset, lines = 0, 1
+    with open(path, "rb") as fh:
+        while True:
+            chunk = fh.read(1 << 20)
+            try:
+                decoder.decode(chunk, final=not chunk)
+            except UnicodeDecodeError as exc:
+                bad = offset + exc.start
+                return bad, lines + chunk[:max(exc.start, 0)].count(b"\n")
+            if not chunk:
+                return None
+            offset += len(chunk)
+            lines += chunk.count(b"\n")
+
+
+def _check_text(path: Path, src: str, encoding: str) -> None:
+    """Refuse a file that is no text at all: control characters other than tab, CR,
+    LF, Ctrl-Z and NUL (NUL padding: :func:`_slow_parse` explains it) in its first
+    64 kB (a spreadsheet's .xlsx, a zip or a binary log renamed .csv). For a file read
+    as Windows-1252, say so (:class:`~workbench.errors.InputWarning`)."""
+    with open(path, encoding=encoding) as fh:
+        head = fh.read(1 << 16)
+    if re.search(r"[\x01-\x08\x0b\x0c\x0e-\x19\x1b-\x1f\x7f]", head):
+        raise InputError("not a text file (it holds control characters); a recording CSV "
+                         "is plain text, one row per sample", source=src)
+    if encoding == "cp1252":
+        _warn_cp1252(path, src)
+
+
+def _warn_cp1252(path: Path, src: str) -> None:
+    import warnings
+
+    from .errors import InputWarning
+    info = path.stat()
+    offset, line = _utf8_error(str(path), info.st_mtime_ns, info.st_size)
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        byte = fh.read(1)[0]
+    warnings.warn(InputWarning(
+        f"{src}: not UTF-8 (byte 0x{byte:02x} at line {line}): read as Windows-1252, the "
+        f"usual encoding of Windows programs; numbers are read the same either way, only "
+        f"names and comments could differ. Save it as UTF-8 to be sure"), stacklevel=4)
 
 
 def _decimal(rows: str, sep: str | None) -> str:
@@ -185,7 +244,9 @@ def read_csv(path: Path, column_map: Mapping[str, tuple[str, str | None]] | None
     src = str(path)
     _check_file(path)
     try:
-        with open(path, encoding=text_encoding(path)) as fh:
+        encoding = text_encoding(path)
+        _check_text(path, src, encoding)
+        with open(path, encoding=encoding) as fh:
             metadata, meta_lines, header, header_line = _read_preamble(fh, src)
             columns, sep = _parse_header(header, header_line, src)
             loose = _loose_columns(columns, column_map, metadata.get("units"))
@@ -211,8 +272,9 @@ def read_csv(path: Path, column_map: Mapping[str, tuple[str, str | None]] | None
         data = dict(zip(columns, arrays))
         columns = _drop_text_columns(columns, data, loose, where, sep, src)
     except UnicodeDecodeError as exc:
-        raise InputError(f"not a UTF-8 text file (undecodable byte at offset {exc.start}); "
-                         "a recording CSV is plain text", source=src) from None
+        raise InputError(f"not a text file: neither UTF-8 nor Windows-1252 (byte "
+                         f"0x{exc.object[exc.start]:02x} cannot be decoded); a recording "
+                         "CSV is plain text", source=src) from None
     except OSError as exc:
         raise InputError(f"cannot read the file ({exc.strerror or exc})", source=src) from None
     return columns, {c: data[c] for c in columns}, metadata, src, where
