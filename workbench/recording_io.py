@@ -18,7 +18,7 @@ import re
 import stat
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -226,18 +226,18 @@ def _strip_comment(raw: str) -> str:
     return raw.split("#", 1)[0].strip().strip("\x1a").strip()
 
 
-def read_csv(path: Path, column_map: Mapping[str, tuple[str, str | None]] | None = None
+def read_csv(path: Path, used: Callable[[str, Mapping[str, str]], bool] | None = None
              ) -> Parsed:
     """Parse a CSV recording file (formats.md section 3); see ``Recording.from_csv``.
 
     Returns the raw columns, data, metadata, source and locations, not yet checked
     against the contract (:mod:`workbench.recording` does that).
 
-    A column the workbench does not read (not a known column, not mapped by
-    ``column_map`` (:func:`~workbench.recording_units.parse_column_map`), not named in
-    a ``# units:`` line) that holds text or empty cells -- a logger's wall-clock time
-    stamp, a state name, an unused sensor -- is left out with an
-    :class:`~workbench.errors.InputWarning`: formats.md lets a recording have more
+    ``used(name, metadata)`` says whether a column is read (given by
+    :mod:`workbench.recording`: :func:`~workbench.recording_units.used_column`; None:
+    every column is). A column that is not read and holds text or empty cells -- a
+    logger's wall-clock time stamp, a state name, an unused sensor -- is left out with
+    an :class:`~workbench.errors.InputWarning`: formats.md lets a recording have more
     columns, and no result depends on one that is never read. Every cell of a column
     that is read must be a finite number.
     """
@@ -249,7 +249,8 @@ def read_csv(path: Path, column_map: Mapping[str, tuple[str, str | None]] | None
         with open(path, encoding=encoding) as fh:
             metadata, meta_lines, header, header_line = _read_preamble(fh, src)
             columns, sep = _parse_header(header, header_line, src)
-            loose = _loose_columns(columns, column_map, metadata.get("units"))
+            loose = frozenset(k for k, name in enumerate(columns)
+                              if used is not None and not used(name, metadata))
             trailing = 1 if sep and header.rstrip().endswith(sep) else 0
             start = fh.tell()
             decimal = _decimal(_first_rows(fh), sep)
@@ -278,14 +279,6 @@ def read_csv(path: Path, column_map: Mapping[str, tuple[str, str | None]] | None
     except OSError as exc:
         raise InputError(f"cannot read the file ({exc.strerror or exc})", source=src) from None
     return columns, {c: data[c] for c in columns}, metadata, src, where
-
-
-def _loose_columns(columns: list[str], column_map: Mapping[str, tuple[str, str | None]] | None,
-                   units_text: str | None) -> frozenset[int]:
-    """Indices of the columns the workbench does not read (see :func:`read_csv`)."""
-    from .recording_units import used_column
-    return frozenset(k for k, name in enumerate(columns)
-                     if not used_column(name, column_map, units_text))
 
 
 def _drop_text_columns(columns: list[str], data: dict[str, np.ndarray],
