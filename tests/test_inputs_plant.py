@@ -106,3 +106,20 @@ def test_negative_sample_time_gets_no_tiny_value_hint(tmp_path):
 def test_tiny_sample_time_keeps_its_hint(tmp_path):
     _refused(_edited(tmp_path, "sample_time = 0.01", "sample_time = 1e-9"),
              r"faster than 1 MHz")
+
+
+def test_section_named_after_an_effect_says_where_its_keys_go(tmp_path):
+    path = tmp_path / "plant.toml"
+    path.write_text(PLANT.read_text() + "\n[valve_deadband]\ndeadband = 0.02\n")
+    _refused(path, r"section \[valve_deadband\]", r"'valve_deadband' is an effect",
+             r"\[valve\] deadband")
+
+
+def test_unknown_effect_lists_the_modelled_ones(tmp_path):
+    path = tmp_path / "plant.toml"
+    path.write_text(PLANT.read_text() + "\n[backlash]\nwidth = 0.001\n")
+    text = _refused(path, r"unknown section \[backlash\]", r"effects the workbench models: "
+                    r"dry_friction, .*heat_transfer")
+    typo = _edited(tmp_path, "[cylinder]", "[cylindre]", "typo.toml")
+    assert "effects the workbench models" not in _refused(typo, r"did you mean \[cylinder\]")
+    assert "did you mean" not in text

@@ -326,7 +326,7 @@ class PlantParams:
                 raise InputError(
                     f"unknown section [{top}]"
                     + (f" (did you mean [{hint[0]}]?)" if hint else "")
-                    + f"; known sections: {known}",
+                    + _effect_section_hint(top, bool(hint)) + f"; known sections: {known}",
                     source=source, location=f"section [{top}]")
             if not isinstance(content, Mapping):
                 raise InputError(f"expected a section [{top}] with keys, got a value {content!r}",
@@ -472,6 +472,22 @@ def _nest(values: Mapping[str, Any], name: str) -> dict[str, Any]:
             val = values[key.path]
             out.setdefault(key.section, {})[key.name] = list(val) if key.kind == "floats" else val
     return out
+
+
+def _effect_section_hint(top: str, near_section: bool) -> str:
+    """For a section named after an effect ([dry_friction]): where its keys go
+    (formats.md section 2: an effect is switched on by its keys, not by a section);
+    for another name that is no typo of a section (``near_section`` False): the
+    effects the workbench models."""
+    name = difflib.get_close_matches(top, EFFECT_NAMES, 1, 0.8)
+    if name:
+        keys = ", ".join(f"[{k.section}] {k.name}" for k in EFFECTS[name[0]])
+        return (f"; '{name[0]}' is an effect: it is switched on by its keys, {keys}, "
+                f"not by a section of its name")
+    if near_section:
+        return ""
+    return (f"; effects the workbench models: {', '.join(EFFECT_NAMES)} (formats.md "
+            f"section 2), each switched on by its keys in a known section")
 
 
 def _top_level_key_message(top: str, content: Any) -> str:
