@@ -224,3 +224,23 @@ def test_binary_file_is_not_read_as_windows_1252(tmp_path):
     """A spreadsheet saved as .xlsx and renamed .csv (a zip: control bytes)."""
     path = _write(tmp_path, "sheet.csv", b"PK\x03\x04\x14\x00\x06\x00" + bytes(range(32, 127)))
     _refused(path, r"not a text file")
+
+
+def test_line_numbers_after_an_empty_row_stay_right(tmp_path):
+    """Rows after a dropped ',,,,,' row are still located at their own file line: a
+    time step back at the 30th sample is reported at its line, not one off."""
+    meta, header, rows = _lines()
+    bad = list(rows)
+    bad[29], bad[30] = bad[30], bad[29]          # t decreases from the 30th to 31st row
+    body = meta + [header] + bad[:10] + [",,,,,"] + bad[10:]
+    path = _write(tmp_path, "back.csv", "\n".join(body) + "\n")
+    line = len(meta) + 1 + 10 + 1 + 21           # header, 10 rows, the empty row, 21 more
+    assert body[line - 1] == bad[30]
+    _refused(path, rf"line {line}, column 't'", r"not strictly increasing")
+
+
+def test_a_row_of_nan_words_is_not_an_empty_row(tmp_path):
+    meta, header, rows = _lines()
+    path = _write(tmp_path, "nanrow.csv", "\n".join(meta + [header] + rows[:10]
+                                                  + [",".join(["nan"] * 6)] + rows[10:]) + "\n")
+    _refused(path, rf"line {len(meta) + 12}, column 't'", r"'nan' \(nan\) is not allowed")

@@ -267,6 +267,8 @@ def read_csv(path: Path, used: Callable[[str, Mapping[str, str]], bool] | None =
                 _slow_parse(path, header_line, columns, sep, src,
                             only_line=header_line + k, decimal=decimal, loose=loose)
             arrays = None  # ... unless pandas and Python disagree: then scan it all
+        if arrays is not None:
+            arrays = _drop_empty_rows(arrays, where, columns, sep, src, decimal, loose)
         if arrays is None:
             arrays, where.row_lines = _slow_parse(path, header_line, columns, sep, src,
                                                   decimal=decimal, loose=loose)
@@ -279,6 +281,34 @@ def read_csv(path: Path, used: Callable[[str, Mapping[str, str]], bool] | None =
     except OSError as exc:
         raise InputError(f"cannot read the file ({exc.strerror or exc})", source=src) from None
     return columns, {c: data[c] for c in columns}, metadata, src, where
+
+
+def _drop_empty_rows(arrays: list[np.ndarray], where: "CsvWhere", columns: list[str],
+                     sep: str | None, src: str, decimal: str, loose: frozenset[int]
+                     ) -> list[np.ndarray] | None:
+    """``arrays`` without the rows pandas read as all-NaN that are a spreadsheet's empty
+    rows (",,,,,": blank, as :func:`_slow_parse` reads them); such a row that holds
+    text (``nan,nan,...``) is checked by the slow parser, which reports it. None (the
+    caller parses it all slowly) when pandas' rows and the file's data lines do not
+    pair one to one (a tab-only line: a row to pandas, a blank line to the file)."""
+    empty = np.ones(len(arrays[0]), dtype=bool)
+    for arr in arrays:
+        empty &= np.isnan(arr)
+    if not empty.any():
+        return arrays
+    where._line_of(0)                       # the file's data lines, once
+    if len(where.row_lines) != len(empty):
+        where.row_lines = None
+        return None
+    lines = [where._line_of(int(i)) for i in np.flatnonzero(empty)]
+    with open(where.path, encoding=text_encoding(where.path)) as fh:
+        texts = dict((n, raw) for n, raw in enumerate(fh, start=1) if n in set(lines))
+    for line in lines:
+        if _strip_comment(texts[line]).replace(sep or " ", "").replace('"', "").strip():
+            _slow_parse(where.path, where.header_line, columns, sep, src, only_line=line,
+                        decimal=decimal, loose=loose)   # raises for "nan,nan,..."
+    where.row_lines = [n for n, e in zip(where.row_lines, empty) if not e]
+    return [arr[~empty] for arr in arrays]
 
 
 def _drop_text_columns(columns: list[str], data: dict[str, np.ndarray],
@@ -461,11 +491,12 @@ def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0, decimal
                                                                na_value=np.nan)
         arrays.append(arr)
     finite = np.ones(frame.shape[0], dtype=bool)
+    empty = frame.isna().all(axis=1).to_numpy()   # no cell at all: ",,,,," (or "nan,...")
     for k, arr in enumerate(arrays):
         if k not in loose:                  # ``loose`` columns may hold text: NaN there
             finite &= np.isfinite(arr)
-    if not finite.all():
-        return ("row", int(np.argmin(finite)))
+    if not (finite | empty).all():
+        return ("row", int(np.argmin(finite | empty)))
     return arrays
 
 
