@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["WorkbenchError", "InputError"]
+__all__ = ["WorkbenchError", "InputError", "InputWarning"]
 
 
 class WorkbenchError(Exception):
@@ -39,3 +39,9 @@ def positive(name: str, value, unit: str) -> float:
     if not math.isfinite(v) or v <= 0.0:
         raise InputError(f"{name} must be a finite number > 0 {unit}, got {value!r}")
     return v
+
+
+class InputWarning(UserWarning):
+    """An input was read, but part of it was left out or read in a way the user should
+    know about (an unused column that holds text). The command line prints it as one
+    line ``workbench COMMAND: warning: ...``; the message names the file and where."""

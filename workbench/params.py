@@ -45,7 +45,7 @@ from typing import Any, Mapping
 import tomli_w
 
 from .errors import InputError
-from .params_units import check_units, read_toml, slip_hint
+from .params_units import check_units, quoted_number_hint, read_toml, slip_hint
 
 __all__ = [
     "Key",
@@ -326,7 +326,7 @@ class PlantParams:
                 raise InputError(
                     f"unknown section [{top}]"
                     + (f" (did you mean [{hint[0]}]?)" if hint else "")
-                    + f"; known sections: {known}",
+                    + _effect_section_hint(top, bool(hint)) + f"; known sections: {known}",
                     source=source, location=f"section [{top}]")
             if not isinstance(content, Mapping):
                 raise InputError(f"expected a section [{top}] with keys, got a value {content!r}",
@@ -474,6 +474,22 @@ def _nest(values: Mapping[str, Any], name: str) -> dict[str, Any]:
     return out
 
 
+def _effect_section_hint(top: str, near_section: bool) -> str:
+    """For a section named after an effect ([dry_friction]): where its keys go
+    (formats.md section 2: an effect is switched on by its keys, not by a section);
+    for another name that is no typo of a section (``near_section`` False): the
+    effects the workbench models."""
+    name = difflib.get_close_matches(top, EFFECT_NAMES, 1, 0.8)
+    if name:
+        keys = ", ".join(f"[{k.section}] {k.name}" for k in EFFECTS[name[0]])
+        return (f"; '{name[0]}' is an effect: it is switched on by its keys, {keys}, "
+                f"not by a section of its name")
+    if near_section:
+        return ""
+    return (f"; effects the workbench models: {', '.join(EFFECT_NAMES)} (formats.md "
+            f"section 2), each switched on by its keys in a known section")
+
+
 def _top_level_key_message(top: str, content: Any) -> str:
     """Explain a key outside every section (``title = ...``): not a section."""
     owners = [k.section for k in SCHEMA if k.name == top]
@@ -492,8 +508,9 @@ def _check_value(key: Key, raw: Any, source: str) -> Any:
             raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)
         return raw
     if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-        raise InputError(f"expected {key.expected()}, got {raw!r} ({type(raw).__name__})",
-                         source=source, location=loc)
+        hint = quoted_number_hint(key.name, key.unit, raw) if isinstance(raw, str) else ""
+        raise InputError(f"expected {key.expected()}, got {raw!r} ({type(raw).__name__})"
+                         + hint, source=source, location=loc)
     if key.kind == "int":
         if not isinstance(raw, int):
             raise InputError(f"expected {key.expected()}, got {raw!r}", source=source, location=loc)

@@ -16,6 +16,7 @@ conversion.
 
 from __future__ import annotations
 
+import re
 import stat
 import tomllib
 from pathlib import Path
@@ -23,7 +24,8 @@ from typing import Any, Mapping
 
 from .errors import InputError
 
-__all__ = ["MAX_PLANT_FILE_BYTES", "PLAUSIBLE", "read_toml", "check_units", "slip_hint"]
+__all__ = ["MAX_PLANT_FILE_BYTES", "PLAUSIBLE", "read_toml", "check_units", "slip_hint",
+           "quoted_number_hint"]
 
 #: Largest plant file read, bytes: a plant file is a few kB of keys (a fitted valve
 #: polynomial included); anything this large is not one.
@@ -58,6 +60,12 @@ PLAUSIBLE: dict[str, tuple[float, float, str, str]] = {
                       "run would take {steps:.3g} steps): a typo? s expected",
         "a controller period above 10 s: ms? {v:g} ms = {m:g} s"),
 }
+
+
+#: Keys whose "below" hint is about a tiny positive value (a sample time of 1e-9 s); for
+#: zero or a negative value it would be nonsense ("a 24 s run would take inf steps").
+#: Temperatures are not here: -20 is a plausible Celsius slip.
+_POSITIVE_ONLY = frozenset({"controller.sample_time"})
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -106,16 +114,63 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     except UnicodeDecodeError as exc:
         line = raw[:exc.start].count(b"\n") + 1
         raise InputError(f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset "
-                         f"{exc.start} cannot be decoded); save the plant file as UTF-8",
+                         f"{exc.start} cannot be decoded); save the plant file as UTF-8"
+                         + _not_a_plant_hint(path, ""),
                          source=src, location=f"line {line}") from None
     try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", source=src) from None
+        raise InputError(f"not valid TOML: {exc}{_toml_line(text, str(exc))}"
+                         + _not_a_plant_hint(path, text), source=src) from None
     except RecursionError:
         raise InputError("not a plant file: tables or arrays are nested too deeply to "
                          "parse (a plant file has one level of [sections])",
                          source=src) from None
+    if not data:
+        raise InputError("the file holds no keys (it is empty, or only blank and '#' "
+                         "comment lines); a plant file has the sections [gas], [supply], "
+                         "[valve], [cylinder] and [load] (formats.md section 1)", source=src)
+    return data
+
+
+#: tomllib's position in its messages: "... (at line 29, column 11)".
+_TOML_AT = re.compile(r"\(at line (\d+), column (\d+)\)")
+#: Suffixes of the recordings the workbench reads (formats.md section 3).
+_RECORDING_SUFFIXES = (".csv", ".txt", ".mat")
+
+
+def _toml_line(text: str, message: str) -> str:
+    """``": 'mass = 1.2.3'"``, the line tomllib's ``message`` points at, or ``""``.
+
+    The message gives line and column; the line itself is what the user looks for
+    (a duplicated key, a missing quote or bracket)."""
+    match = _TOML_AT.search(message)
+    if not match:
+        return ""
+    lines = text.splitlines()
+    k = int(match.group(1))
+    if not 1 <= k <= len(lines) or not lines[k - 1].strip():
+        return ""
+    shown = lines[k - 1].strip()
+    shown = shown if len(shown) <= 80 else shown[:77] + "..."
+    return f"; the line reads {shown!r}"
+
+
+def _not_a_plant_hint(path: Path, text: str) -> str:
+    """A hint when the file given as the plant is plainly a recording: a recording's
+    suffix, or a first line that is a CSV header naming the recording's columns
+    (t, u, x: formats.md section 3). Swapped arguments are the usual cause."""
+    first = ""
+    for line in text.splitlines():
+        if line.strip() and not line.lstrip().startswith("#"):
+            first = line.strip()
+            break
+    cells = {c.strip().strip('"').strip() for c in re.split(r"[,;\t]", first)}
+    if path.suffix.lower() not in _RECORDING_SUFFIXES and not {"t", "x"} <= cells:
+        return ""
+    return ("; this looks like a recording (formats.md section 3), not a plant file: the "
+            "plant file (.toml) comes first, e.g. workbench diagnose PLANT.toml "
+            "RECORDING.csv --out DIR")
 
 
 def check_units(values: Mapping[str, Any], source: str) -> None:
@@ -152,8 +207,46 @@ def slip_hint(path: str, value: float) -> str:
     low, high, below, above = PLAUSIBLE[path]
     v = float(value)
     hint = below if v < low else above if v > high else ""
+    if v <= 0.0 and path in _POSITIVE_ONLY:
+        return ""           # a sign or a zero, not a tiny value: the range says it all
     if not hint:
         return ""
     fill = {"v": v, "k": v + _KELVIN, "pa": v * 1e5, "c": v * 1e-8, "m": v * 1e-3,
             "cc": v * 1e-6, "steps": 24.0 / v if v > 0 else float("inf")}
     return ": " + hint.format(**fill)
+
+
+#: A number written as text, with an optional unit: "1.2", "25 mm", "6 bar", "-3e-6 m^3".
+_QUOTED = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*?)?\s*$")
+#: Quantity of a plant key's SI unit, for the conversions of recording_units.UNIT_SCALES.
+_QUANTITY_OF_UNIT = {"m": "length", "Pa": "pressure", "s": "time", "V": "voltage",
+                     "m/s": "velocity"}
+
+
+def quoted_number_hint(name: str, unit: str, raw: str) -> str:
+    """``": <hint>"`` for a number given as text (``mass = "1.2"``, ``bore = "25 mm"``).
+
+    A plant file holds plain SI numbers (formats.md section 1), so the text is never
+    converted; the hint shows the line to write instead. A unit the workbench knows for
+    the key's quantity (the recording units of :mod:`workbench.recording_units`) is
+    converted in the hint; a pressure in a unit without ``_g`` is shown both as
+    absolute and as gauge, since datasheets quote supply pressures as gauge.
+    """
+    match = _QUOTED.match(raw)
+    if not match:
+        return ""
+    number, text_unit = float(match.group(1)), (match.group(2) or "").strip()
+    if not text_unit or text_unit == unit:
+        return f": write the number without quotes, {name} = {number:g} ({unit or '-'})"
+    from .recording_units import UNIT_SCALES
+    scales = UNIT_SCALES.get(_QUANTITY_OF_UNIT.get(unit, ""), {})
+    if text_unit not in scales:
+        return (f": values are plain numbers in SI units ({unit or '-'}), without quotes "
+                f"or a unit name")
+    scale, offset = scales[text_unit]
+    si = number * scale + offset
+    hint = f": values are plain numbers in {unit}: {name} = {si:.6g}"
+    if unit == "Pa" and offset == 0.0 and f"{text_unit}_g" in scales:
+        gauge = number * scales[f"{text_unit}_g"][0] + scales[f"{text_unit}_g"][1]
+        hint += f" if {raw.strip()!r} is absolute, {name} = {gauge:.6g} if it is gauge"
+    return hint

@@ -36,7 +36,7 @@ import numpy as np
 from .errors import InputError
 from .recording_io import KNOWN_COLUMNS, REQUIRED_COLUMNS, Where, read_csv, read_mat, write_atomic
 from .recording_units import (also_suspect, apply_units, check_against_plant, check_plausible,
-                              parse_column_map, time_hint, time_window)
+                              parse_column_map, time_hint, time_window, used_column)
 from .signals import FIT_SIGNALS, fit, fit_signals
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -225,7 +225,9 @@ class Recording:
             Naming the file, the 1-based line (counting metadata and header lines) and
             column, and the problem.
         """
-        return _checked(*read_csv(Path(path)), **options)
+        column_map = parse_column_map(options.get("columns"))
+        return _checked(*read_csv(Path(path), lambda name, meta: used_column(
+            name, column_map, meta.get("units"))), **options)
 
     @classmethod
     def from_mat(cls, path: str | os.PathLike[str], **options: Any) -> "Recording":

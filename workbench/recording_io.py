@@ -9,6 +9,8 @@ result against the contract of ``formats.md`` section 3 and builds the
 
 from __future__ import annotations
 
+import codecs
+import functools
 import itertools
 import math
 import os
@@ -16,7 +18,7 @@ import re
 import stat
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -131,11 +133,68 @@ def _check_file(path: Path) -> None:
 
 def text_encoding(path: Path) -> str:
     """The text encoding to read ``path`` with: UTF-16 when the file starts with its
-    byte-order mark (spreadsheet programs' "Unicode text"), else UTF-8 with an optional
-    BOM ("utf-8-sig")."""
+    byte-order mark (spreadsheet programs' "Unicode text"), UTF-8 with an optional BOM
+    ("utf-8-sig") when the whole file is UTF-8, else Windows-1252, the default of
+    Windows programs in western Europe ("Temp [\xb0C]", "Weg [\xb5m]" in a header or
+    comment). Numbers and the workbench's column names are ASCII, the same in every
+    one of these, so the choice only affects names and comments; :func:`read_csv`
+    says when it read a file as Windows-1252."""
     with open(path, "rb") as fh:
         head = fh.read(2)
-    return "utf-16" if head in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"
+    if head in (b"\xff\xfe", b"\xfe\xff"):
+        return "utf-16"
+    info = path.stat()
+    return "utf-8-sig" if _utf8_error(str(path), info.st_mtime_ns, info.st_size) is None \
+        else "cp1252"
+
+
+@functools.lru_cache(maxsize=8)
+def _utf8_error(path: str, mtime_ns: int, size: int) -> tuple[int, int] | None:  # noqa: ARG001
+    """(offset, line) of the first byte that is not UTF-8, or None for a UTF-8 file.
+    Cached per file version (``mtime_ns``, ``size``): a load asks several times."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    offset, lines = 0, 1
+    with open(path, "rb") as fh:
+        while True:
+            chunk = fh.read(1 << 20)
+            try:
+                decoder.decode(chunk, final=not chunk)
+            except UnicodeDecodeError as exc:
+                bad = offset + exc.start
+                return bad, lines + chunk[:max(exc.start, 0)].count(b"\n")
+            if not chunk:
+                return None
+            offset += len(chunk)
+            lines += chunk.count(b"\n")
+
+
+def _check_text(path: Path, src: str, encoding: str) -> None:
+    """Refuse a file that is no text at all: control characters other than tab, CR,
+    LF, Ctrl-Z and NUL (NUL padding: :func:`_slow_parse` explains it) in its first
+    64 kB (a spreadsheet's .xlsx, a zip or a binary log renamed .csv). For a file read
+    as Windows-1252, say so (:class:`~workbench.errors.InputWarning`)."""
+    with open(path, encoding=encoding) as fh:
+        head = fh.read(1 << 16)
+    if re.search(r"[\x01-\x08\x0b\x0c\x0e-\x19\x1b-\x1f\x7f]", head):
+        raise InputError("not a text file (it holds control characters); a recording CSV "
+                         "is plain text, one row per sample", source=src)
+    if encoding == "cp1252":
+        _warn_cp1252(path, src)
+
+
+def _warn_cp1252(path: Path, src: str) -> None:
+    import warnings
+
+    from .errors import InputWarning
+    info = path.stat()
+    offset, line = _utf8_error(str(path), info.st_mtime_ns, info.st_size)
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        byte = fh.read(1)[0]
+    warnings.warn(InputWarning(
+        f"{src}: not UTF-8 (byte 0x{byte:02x} at line {line}): read as Windows-1252, the "
+        f"usual encoding of Windows programs; numbers are read the same either way, only "
+        f"names and comments could differ. Save it as UTF-8 to be sure"), stacklevel=4)
 
 
 def _decimal(rows: str, sep: str | None) -> str:
@@ -162,46 +221,126 @@ def _first_rows(fh: Any, count: int = 20) -> str:
 
 
 def _strip_comment(raw: str) -> str:
-    """Text of a data line without a trailing '#' comment and surrounding space."""
-    return raw.split("#", 1)[0].strip()
+    """Text of a data line without a trailing '#' comment and surrounding space (and
+    without the Ctrl-Z that DOS programs write as an end-of-file mark)."""
+    return raw.split("#", 1)[0].strip().strip("\x1a").strip()
 
 
-def read_csv(path: Path) -> Parsed:
+def read_csv(path: Path, used: Callable[[str, Mapping[str, str]], bool] | None = None
+             ) -> Parsed:
     """Parse a CSV recording file (formats.md section 3); see ``Recording.from_csv``.
 
     Returns the raw columns, data, metadata, source and locations, not yet checked
     against the contract (:mod:`workbench.recording` does that).
+
+    ``used(name, metadata)`` says whether a column is read (given by
+    :mod:`workbench.recording`: :func:`~workbench.recording_units.used_column`; None:
+    every column is). A column that is not read and holds text or empty cells -- a
+    logger's wall-clock time stamp, a state name, an unused sensor -- is left out with
+    an :class:`~workbench.errors.InputWarning`: formats.md lets a recording have more
+    columns, and no result depends on one that is never read. Every cell of a column
+    that is read must be a finite number.
     """
     src = str(path)
     _check_file(path)
     try:
-        with open(path, encoding=text_encoding(path)) as fh:
+        encoding = text_encoding(path)
+        _check_text(path, src, encoding)
+        with open(path, encoding=encoding) as fh:
             metadata, meta_lines, header, header_line = _read_preamble(fh, src)
             columns, sep = _parse_header(header, header_line, src)
+            loose = frozenset(k for k, name in enumerate(columns)
+                              if used is not None and not used(name, metadata))
             trailing = 1 if sep and header.rstrip().endswith(sep) else 0
             start = fh.tell()
             decimal = _decimal(_first_rows(fh), sep)
             fh.seek(start)
-            arrays = _fast_parse(fh, len(columns), sep, trailing, decimal)
+            arrays = _fast_parse(fh, len(columns), sep, trailing, decimal, loose)
         where = CsvWhere(path, header_line, meta_lines)
         if isinstance(arrays, tuple):
             # pandas pointed at one bad row: check only that line, which raises ...
             kind, k = arrays
             if kind == "row":
-                _slow_parse(path, header_line, columns, sep, src, only_row=k, decimal=decimal)
+                _slow_parse(path, header_line, columns, sep, src, only_row=k, decimal=decimal,
+                            loose=loose)
             else:
                 _slow_parse(path, header_line, columns, sep, src,
-                            only_line=header_line + k, decimal=decimal)
+                            only_line=header_line + k, decimal=decimal, loose=loose)
             arrays = None  # ... unless pandas and Python disagree: then scan it all
+        if arrays is not None:
+            arrays = _drop_empty_rows(arrays, where, columns, sep, src, decimal, loose)
         if arrays is None:
             arrays, where.row_lines = _slow_parse(path, header_line, columns, sep, src,
-                                                  decimal=decimal)
+                                                  decimal=decimal, loose=loose)
+        data = dict(zip(columns, arrays))
+        columns = _drop_text_columns(columns, data, loose, where, sep, src)
     except UnicodeDecodeError as exc:
-        raise InputError(f"not a UTF-8 text file (undecodable byte at offset {exc.start}); "
-                         "a recording CSV is plain text", source=src) from None
+        raise InputError(f"not a text file: neither UTF-8 nor Windows-1252 (byte "
+                         f"0x{exc.object[exc.start]:02x} cannot be decoded); a recording "
+                         "CSV is plain text", source=src) from None
     except OSError as exc:
         raise InputError(f"cannot read the file ({exc.strerror or exc})", source=src) from None
-    return columns, dict(zip(columns, arrays)), metadata, src, where
+    return columns, {c: data[c] for c in columns}, metadata, src, where
+
+
+def _drop_empty_rows(arrays: list[np.ndarray], where: "CsvWhere", columns: list[str],
+                     sep: str | None, src: str, decimal: str, loose: frozenset[int]
+                     ) -> list[np.ndarray] | None:
+    """``arrays`` without the rows pandas read as all-NaN that are a spreadsheet's empty
+    rows (",,,,,": blank, as :func:`_slow_parse` reads them); such a row that holds
+    text (``nan,nan,...``) is checked by the slow parser, which reports it. None (the
+    caller parses it all slowly) when pandas' rows and the file's data lines do not
+    pair one to one (a tab-only line: a row to pandas, a blank line to the file)."""
+    empty = np.ones(len(arrays[0]), dtype=bool)
+    for arr in arrays:
+        empty &= np.isnan(arr)
+    if not empty.any():
+        return arrays
+    where._line_of(0)                       # the file's data lines, once
+    if len(where.row_lines) != len(empty):
+        where.row_lines = None
+        return None
+    lines = [where._line_of(int(i)) for i in np.flatnonzero(empty)]
+    with open(where.path, encoding=text_encoding(where.path)) as fh:
+        texts = dict((n, raw) for n, raw in enumerate(fh, start=1) if n in set(lines))
+    for line in lines:
+        if _strip_comment(texts[line]).replace(sep or " ", "").replace('"', "").strip():
+            _slow_parse(where.path, where.header_line, columns, sep, src, only_line=line,
+                        decimal=decimal, loose=loose)   # raises for "nan,nan,..."
+    where.row_lines = [n for n, e in zip(where.row_lines, empty) if not e]
+    return [arr[~empty] for arr in arrays]
+
+
+def _drop_text_columns(columns: list[str], data: dict[str, np.ndarray],
+                       loose: frozenset[int], where: "CsvWhere", sep: str | None,
+                       src: str) -> list[str]:
+    """``columns`` without the unread ones that hold a non-number, each with a warning
+    naming its first such cell."""
+    import warnings
+
+    from .errors import InputWarning
+    kept = []
+    for k, name in enumerate(columns):
+        bad = np.flatnonzero(~np.isfinite(data[name])) if k in loose else ()
+        if not len(bad):
+            kept.append(name)
+            continue
+        line = where._line_of(int(bad[0]))
+        cell = _cell_text(where.path, line, k, sep)
+        what = "an empty cell" if not cell else f"{cell!r}"
+        warnings.warn(InputWarning(
+            f"{src}: column '{name}' is left out: it is not a column the workbench reads "
+            f"and it does not hold numbers only ({what} at line {line}, {len(bad)} such "
+            f"cells); map it with --columns if it is a signal"), stacklevel=2)
+    return kept
+
+
+def _cell_text(path: Path, line: int, k: int, sep: str | None) -> str:
+    """The text of cell ``k`` (0-based) at file line ``line``, stripped."""
+    with open(path, encoding=text_encoding(path)) as fh:
+        raw = next(itertools.islice(fh, line - 1, None), "")
+    cells = _strip_comment(raw).split(sep) if sep else _strip_comment(raw).split()
+    return cells[k].strip().strip('"').strip() if k < len(cells) else ""
 
 
 def _read_preamble(fh: Any, src: str) -> tuple[dict[str, str], dict[str, int], str, int]:
@@ -239,6 +378,10 @@ def _read_preamble(fh: Any, src: str) -> tuple[dict[str, str], dict[str, int], s
                      "followed by one row per sample", source=src, location=f"line {lineno}")
 
 
+#: A TOML line ("[load]", "mass = 1.2", 'name = "rig"'): a plant file read as a recording.
+_TOML_LINE = re.compile(r"^(\[[A-Za-z_][\w.]*\]|[A-Za-z_][\w.]*\s*=(?!=).*)$")
+
+
 def _parse_header(header: str, line: int, src: str) -> tuple[list[str], str | None]:
     """Column names and separator (None: white space) from the header line."""
     for sep in (",", "\t", ";"):
@@ -251,6 +394,12 @@ def _parse_header(header: str, line: int, src: str) -> tuple[list[str], str | No
     while len(names) > 1 and not names[-1]:
         names.pop()  # trailing delimiters, as some loggers write them: no column
     location = f"line {line} (header)"
+    if _TOML_LINE.match(header):
+        raise InputError(f"the first line that is not a '#' comment reads {header[:60]!r}, "
+                         "a line of a TOML plant file, not a recording's header: is this "
+                         "the plant file? Commands take the plant file first, e.g. "
+                         "workbench diagnose PLANT.toml RECORDING.csv --out DIR",
+                         source=src, location=location)
     if all(_is_number(c) for c in names):
         raise InputError(f"the first line that is not a '#' comment holds numbers "
                          f"({header[:60]!r}), not column names; add a header such as "
@@ -259,6 +408,13 @@ def _parse_header(header: str, line: int, src: str) -> tuple[list[str], str | No
         if not name:
             raise InputError(f"column {k} of the header has no name", source=src,
                              location=location)
+        for other in (",", ";", "\t"):
+            parts = [c.strip() for c in name.split(other)]
+            if other != sep and len(parts) > 1 and set(parts) & set(KNOWN_COLUMNS):
+                raise InputError(f"header cell {name!r} holds {other!r} while the header "
+                                 f"separates its cells by {sep or 'spaces'!r}: the file "
+                                 "mixes separators; use one throughout", source=src,
+                                 location=location)
     first: dict[str, int] = {}
     for k, name in enumerate(names, start=1):
         if name in first:
@@ -277,13 +433,15 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0, decimal: str = "."
+def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0, decimal: str = ".",
+                loose: frozenset[int] = frozenset()
                 ) -> list[np.ndarray] | tuple[str, int] | None:
     """Parse the data rows with pandas' C reader.
 
     Returns the columns as float64 arrays; or ``("row", i)``, the 0-based index of the
     first data row that is not all finite numbers (a NaN/inf, a text or empty cell, too
-    few cells); or ``("line", k)`` when pandas stopped at the k-th line after the header
+    few cells; the columns of ``loose`` may hold anything, NaN where it is not a
+    number); or ``("line", k)`` when pandas stopped at the k-th line after the header
     (too many cells); or None if pandas failed otherwise or found the wrong number of
     columns. The caller checks the suspect row with the slow parser, which reports it.
     pandas takes the number of fields from the first row: a first row with more
@@ -333,21 +491,25 @@ def _fast_parse(fh: Any, ncols: int, sep: str | None, trailing: int = 0, decimal
                                                                na_value=np.nan)
         arrays.append(arr)
     finite = np.ones(frame.shape[0], dtype=bool)
-    for arr in arrays:
-        finite &= np.isfinite(arr)
-    if not finite.all():
-        return ("row", int(np.argmin(finite)))
+    empty = frame.isna().all(axis=1).to_numpy()   # no cell at all: ",,,,," (or "nan,...")
+    for k, arr in enumerate(arrays):
+        if k not in loose:                  # ``loose`` columns may hold text: NaN there
+            finite &= np.isfinite(arr)
+    if not (finite | empty).all():
+        return ("row", int(np.argmin(finite | empty)))
     return arrays
 
 
 def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | None,
                 src: str, only_row: int | None = None, only_line: int | None = None,
-                decimal: str = ".") -> tuple[list[np.ndarray], list[int]]:
+                decimal: str = ".", loose: frozenset[int] = frozenset()
+                ) -> tuple[list[np.ndarray], list[int]]:
     """Parse row by row, raising on the first bad line; also return each row's line.
 
     With ``only_row`` (0-based data row) or ``only_line`` (1-based file line), skip to
     that row without parsing the others, and check only it. ``decimal``: "," for
-    numbers written with a decimal comma (:func:`_decimal`).
+    numbers written with a decimal comma (:func:`_decimal`). A cell of a ``loose``
+    column (by index) that is not a finite number is read as NaN, not refused.
     """
     ncols = len(columns)
     rows: list[list[float]] = []
@@ -358,38 +520,52 @@ def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | Non
             if lineno <= header_line:
                 continue
             text = _strip_comment(raw)
-            if not text:
-                continue
+            if not text or (sep and not text.replace(sep, "").replace('"', "").strip()):
+                continue    # blank, or a spreadsheet's empty row (",,,,,"): no sample
             count += 1
             if only_row is not None and count != only_row:
                 continue
             if only_line is not None and lineno != only_line:
                 continue
+            if "\x00" in raw:
+                raise InputError(_nul_message(fh, lineno), source=src,
+                                 location=f"line {lineno}")
             cells = text.split(sep) if sep else text.split()
             while len(cells) > ncols and not cells[-1].strip():
                 cells.pop()  # a trailing delimiter
             if len(cells) != ncols:
-                cut = "" if raw.endswith("\n") or len(cells) > ncols else (
-                    ": the last line is cut off (the logger stopped while writing it?); "
-                    "delete that line")
+                cut = ""
+                if len(cells) < ncols and (not raw.endswith("\n") or _at_end(fh)):
+                    cut = (": the last line is cut off (the logger stopped while writing "
+                           "it?); delete that line, the rows before it are complete")
                 raise InputError(f"{len(cells)} cells in this row but the header has "
                                  f"{ncols} ({','.join(columns)}){cut}", source=src,
                                  location=f"line {lineno}")
             row = []
-            for name, cell in zip(columns, cells):
+            for k, (name, cell) in enumerate(zip(columns, cells)):
                 cell = cell.strip().strip('"').strip()
                 if decimal == ",":
                     cell = cell.replace(",", ".")
                 try:
                     value = float(cell)
                 except ValueError:
+                    if k in loose:
+                        row.append(math.nan)
+                        continue
                     what = "an empty cell" if not cell else f"{cell!r}"
                     hint = ""
+                    if [c.strip().strip('"').strip() for c in cells] == columns:
+                        raise InputError(
+                            f"the header ({','.join(columns)}) again: the file holds "
+                            "more than one run (the logger was restarted and appended?); "
+                            "split it here into two files (workbench diagnose reads "
+                            "several recordings of one rig together)", source=src,
+                            location=f"line {lineno}")
                     if "," in cell and sep != ",":
                         hint = " (decimal comma? write numbers with a decimal point)"
                     raise InputError(f"{what} is not a number{hint}", source=src,
                                      location=f"line {lineno}, column '{name}'") from None
-                if not math.isfinite(value):
+                if not math.isfinite(value) and k not in loose:
                     raise InputError(f"{cell!r} ({value}) is not allowed: every cell must "
                                      "be a finite number", source=src,
                                      location=f"line {lineno}, column '{name}'")
@@ -398,12 +574,36 @@ def _slow_parse(path: Path, header_line: int, columns: list[str], sep: str | Non
             row_lines.append(lineno)
             if only_row is not None or only_line is not None:
                 break
+    if not rows and (only_row is not None or only_line is not None):
+        return [], []       # the suspect line is fine after all: the caller scans it all
     if not rows:
         raise InputError(f"no data rows after the header (line {header_line}): a "
                          "recording needs one row per sample", source=src,
                          location=f"line {header_line}")
     values = np.array(rows, dtype=np.float64)
     return [values[:, k] for k in range(ncols)], row_lines
+
+
+def _at_end(fh: Any) -> bool:
+    """Whether no data line follows in ``fh`` (only blank and '#' lines): consumes it.
+    Only called on the way to an error, to tell a cut-off last line from a short row."""
+    return not any(_strip_comment(raw.replace("\x00", "")) for raw in fh)
+
+
+def _nul_message(fh: Any, lineno: int) -> str:
+    """The error for NUL characters at ``lineno``: consumes ``fh``.
+
+    A logger that lost power (or was killed) while writing to an SD card or a FAT
+    file system leaves the file's last block filled with NUL bytes: the rows before
+    are complete. NULs amid good rows mean a damaged copy instead."""
+    tail_only = all(not raw.replace("\x00", "").strip() or "\x00" in raw for raw in fh)
+    if tail_only:
+        return ("NUL characters (\\x00) from here to the end of the file: the file was "
+                "not closed properly (the logger lost power or was killed while "
+                f"writing?); the rows before line {lineno} are complete: cut the file "
+                "there, or ask the logger for a clean copy")
+    return ("NUL characters (\\x00) in this line, and good rows after it: the file is "
+            "damaged (an incomplete copy or transfer?); copy it again from the logger")
 
 
 def read_mat(path: Path) -> Parsed:
@@ -419,7 +619,8 @@ def read_mat(path: Path) -> Parsed:
                          "MATLAB save it again as v7: save(filename, 't', 'u', 'x', ..., "
                          "'-v7')", source=src) from None
     except Exception as exc:  # scipy raises ValueError, TypeError, OSError, ...
-        raise InputError(f"cannot read as a MATLAB .mat file ({exc})", source=src) from None
+        raise InputError(f"cannot read as a MATLAB .mat file ({exc}){_mat_hint(path)}",
+                         source=src) from None
     where = MatWhere()
     variables = {k: v for k, v in raw.items() if not k.startswith("__")}
     missing = [c for c in REQUIRED_COLUMNS if c not in variables]
@@ -471,6 +672,21 @@ def read_mat(path: Path) -> Parsed:
             metadata[name] = " ".join(str(arr.ravel()[0]).split())
         # anything else (structs, cells, matrices, other lengths) is not a signal
     return columns, data, metadata, src, where
+
+
+def _mat_hint(path: Path) -> str:
+    """Why a .mat file may not parse: text inside (a CSV with the wrong suffix), or a
+    MATLAB header and then too few bytes (a save or copy that was cut off)."""
+    with open(path, "rb") as fh:
+        head = fh.read(128)
+    if head.startswith(b"MATLAB 5.0 MAT-file"):
+        return ("; it has a MATLAB header but the data cannot be read: the file is "
+                "probably cut off (an interrupted save or copy); save or copy it again")
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError:
+        return ""
+    return "; the file holds text: a CSV recording with a .mat suffix? rename it to .csv"
 
 
 def _mat_kind(value: np.ndarray) -> str:

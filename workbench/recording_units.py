@@ -33,7 +33,7 @@ from .recording_io import Where
 __all__ = ["QUANTITY", "UNIT_SCALES", "JITTER_TOLERANCE", "GAP_FACTOR", "MAX_SAMPLE_STEP",
            "MAX_COMMAND", "MAX_POSITION", "STROKE_MARGIN", "COMMAND_MARGIN",
            "parse_column_map", "apply_units", "check_plausible", "check_against_plant",
-           "time_window", "time_hint", "unit_suspects", "also_suspect"]
+           "time_window", "time_hint", "unit_suspects", "also_suspect", "used_column"]
 
 _P_ATM = 101325.0  # Pa, offset of gauge pressures
 
@@ -74,6 +74,22 @@ COMMAND_MARGIN = 0.05
 _HEADER_UNIT = re.compile(r"^\s*([^\[\(]+?)\s*[\[\(]\s*([^\]\)]+?)\s*[\]\)]\s*$")
 #: "x/mm": quantity over unit (ISO 80000-1), as axis labels and many loggers write it.
 _HEADER_SLASH = re.compile(r"^\s*([A-Za-z_]+)\s*/\s*([A-Za-z_]+)\s*$")
+
+
+def used_column(raw: str, column_map: Mapping[str, tuple[str, str | None]] | None = None,
+                units_text: str | None = None) -> bool:
+    """Whether the file column ``raw`` is read as a workbench signal: a known column
+    (``x``), one with a unit in its header (``x [mm]``), the source of a ``--columns``
+    item, or a name in the file's ``# units:`` line. Any other column is only carried
+    along (and may be left out when it does not hold numbers)."""
+    if raw in QUANTITY:
+        return True
+    match = _HEADER_UNIT.match(raw) or _HEADER_SLASH.match(raw)
+    if match and match.group(1) in QUANTITY:
+        return True
+    if column_map and any(raw == col for col, _ in column_map.values()):
+        return True
+    return bool(units_text) and raw in re.split(r"[,;=\s]+", units_text)
 
 
 def _convert_one(name: str, unit: str, source: str, location: str | None

@@ -370,7 +370,18 @@ def controller_agreement(plant, controller: Any, rec, x: np.ndarray,
                      plant.params["valve.command_max"])
     u_rec = np.asarray(rec["u"])[idx]
     from .signals import fit
-    return fit(u_rec, u_pred) if np.ptp(u_rec) > 0 else 100.0
+    if np.ptp(u_rec) > 0:
+        return fit(u_rec, u_pred)
+    # A constant recorded command has no spread to normalise the fit by. It agrees only
+    # if the controller's own command is that constant too: judged by the prediction's
+    # spread (the same fit with the roles swapped), or, both constant, by equality to
+    # the DAC's resolution scale (1e-9 of the command range). Before, any constant u
+    # counted as 100 %, so a log of the wrong channel (u stuck at the centre while the
+    # piston moves) was replayed in closed loop on r and came out as "no finding".
+    if np.ptp(u_pred) > 0:
+        return fit(u_pred, u_rec)
+    span = plant.params["valve.command_max"] - plant.params["valve.command_min"]
+    return 100.0 if abs(float(u_pred[0]) - float(u_rec[0])) <= 1e-9 * span else 0.0
 
 def command_agreement(plant, rec) -> float | None:
     """Fit (%) of the recorded command ``u`` by the plant file's ``[controller]`` run on

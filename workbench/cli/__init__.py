@@ -146,9 +146,25 @@ def _main(argv: Sequence[str] | None) -> int:
 
 
 def _run(args: argparse.Namespace, name: str) -> int:
-    """Call the command's handler; a user's error is one line on stderr, exit 2."""
+    """Call the command's handler; a user's error is one line on stderr, exit 2; an
+    :class:`~workbench.errors.InputWarning` (part of an input left out) one line
+    ``NAME: warning: ...``, every time it occurs (each names its own file)."""
+    import warnings
+
+    from ..errors import InputWarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, InputWarning):
+            print(f"{name}: warning: {message}", file=sys.stderr, flush=True)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            shown = warnings.showwarning
+            warnings.simplefilter("always", InputWarning)
+            warnings.showwarning = show
+            return int(args.func(args) or 0)
     except WorkbenchError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
