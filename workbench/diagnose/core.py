@@ -54,6 +54,7 @@ Skipped here: a diagnosis takes 5-10 s (tests/test_diagnose*.py run it):
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -280,12 +281,24 @@ def _polish_findings(prep: Prepared, params: PlantParams, chosen: Sequence[Ranke
                      by_name: Mapping[str, Candidate], err0: np.ndarray) -> dict[str, Any]:
     """Each finding's values refined by the grey-box estimator on the windows where it
     removes most of the mismatch (in place; the refit's values stand when the polish
-    fails or jumps). Returns what was polished, for ``details.json``."""
+    fails or jumps). Returns what was polished, for ``details.json``.
+
+    Each member is polished with every other finding in the plant at its values, not
+    only the earlier ones: the set was fitted jointly, and values that trade off
+    across members (a supply pressure and a droop's regulator) polished without the
+    partner take its share (the supply lowered for the droop's pressure drop, then the
+    droop added on top: the drop twice). The polish refines on two short windows; the
+    replay of the whole recording is its check: when the polished values fit it worse
+    (mean fit over the signals), the refit's values stand (``polished["reverted"]``).
+    """
     from .polish import polish
     polished: dict[str, Any] = {}
-    base = params
+    refit = [(r.result.values, r.result.plant_values, r.result.std, r.result.ci95)
+             for r in chosen]
     for i, r in enumerate(chosen):
         cand = by_name[r.name]
+        base = params.replace(**{k: v for j, o in enumerate(chosen) if j != i
+                                 for k, v in o.result.plant_values.items()})
         pol = polish(prep, base, cand, r.result.values, _gain(chosen, i, err0))
         if pol is not None:
             r.result.values = pol.values
@@ -294,8 +307,33 @@ def _polish_findings(prep: Prepared, params: PlantParams, chosen: Sequence[Ranke
             r.result.ci95 = {**r.result.ci95, **pol.ci95}
             polished[r.name] = {"windows_s": pol.windows, "status": pol.status,
                                 "wall_s": round(pol.wall_s, 2)}
-        base = base.replace(**r.result.plant_values)
+    if polished:
+        after = _mean_fit(prep, params, [r.result.plant_values for r in chosen])
+        before = _mean_fit(prep, params, [pv for _, pv, _, _ in refit])
+        if not after >= before:
+            for r, (vals, pv, std, ci) in zip(chosen, refit):
+                r.result.values, r.result.plant_values = vals, pv
+                r.result.std, r.result.ci95 = std, ci
+            polished = {"reverted": {"polished": polished, "mean_fit_polished": after,
+                                     "mean_fit_refit": before}}
     return polished
+
+
+def _mean_fit(prep: Prepared, params: PlantParams, plant_values: Sequence[Mapping[str, Any]]
+              ) -> float:
+    """Mean fit (%) over the signals of the whole recording's replay with ``plant_values``
+    added to ``params`` (-inf when the replay fails)."""
+    aug = params
+    for pv in plant_values:
+        aug = aug.replace(**pv)
+    try:
+        fits = _fits(prep, replay(Plant(aug), prep))
+    except Exception as exc:  # noqa: BLE001 - a failed replay loses the comparison
+        from ..output import reraise_interrupt
+        reraise_interrupt(exc)
+        return -math.inf
+    vals = [v for v in fits.values() if math.isfinite(v)]
+    return float(np.mean(vals)) if vals else -math.inf
 
 
 def _findings(prep: Prepared, params: PlantParams, chosen: Sequence[Ranked],
