@@ -42,15 +42,20 @@ def _ranked(cand, values, n):
                             err=np.zeros(n)), 0.8, 0.2, 100.0, None, None, True)
 
 
-@pytest.fixture(scope="module")
-def rig(tmp_path_factory):
-    plant_file = synth.concealed_case("none", seed=0).write_nominal(
-        tmp_path_factory.mktemp("polish") / "plant.toml")
+def supply_case(root, overrides, duration):
+    """(plant, prepared recording, supply candidates by name): the foreign rig in its PD
+    loop with ``overrides``, ``duration`` s at 1 kHz, the plant file nominal."""
+    plant_file = synth.concealed_case("none", seed=0).write_nominal(root / "plant.toml")
     plant = Plant.from_toml(plant_file).with_friction("stick")
-    rec = foreign_rig.record(plant_file, synth.rich_reference(5, 4.0), 4.0, seed=5,
-                             overrides={"supply.pressure": SUPPLY})
+    rec = foreign_rig.record(plant_file, synth.rich_reference(5, duration), duration,
+                             seed=5, overrides=overrides)
     by = {c.name: c for c in candidates(plant.params, ["supply_droop", "parameter_error"])}
     return plant, prepare(plant, rec), by
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    return supply_case(tmp_path_factory.mktemp("polish"), {"supply.pressure": SUPPLY}, 4.0)
 
 
 def test_each_member_is_polished_with_every_other_member_in_the_plant(rig, monkeypatch):

@@ -9,7 +9,7 @@ transient reaches); the level the loop settles to over seconds separates them.
 :func:`workbench.diagnose.core._replay_check` replays the plant with each prefix of
 the findings; when every finding together fits worse than fewer of them, the set is
 refitted jointly on the re-anchored closed-loop segments
-(:func:`workbench.diagnose.refit.refit_on_replay`), and what still fits worse is said.
+(:func:`workbench.diagnose.refit.refit_set`), and what still fits worse is said.
 
 Recording: the independent simulator, 8 s at 1 kHz, supply 5.64 bar (the file says 6)
 behind a 0.6 l reservoir and a 5e-9 m^3/(s Pa) regulator. The set handed over has the
@@ -23,16 +23,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import foreign_rig
-from workbench.diagnose import synth
 from workbench.diagnose import refit as refit_mod
-from workbench.diagnose.candidates import candidates
 from workbench.diagnose.core import _findings, _mean, _replay_check
-from workbench.diagnose.data import prepare
 from workbench.diagnose.nominal import nominal
-from workbench.plant import Plant
 
-from test_diagnose_polish_joint import _ranked
+from test_diagnose_polish_joint import _ranked, supply_case
 
 TRUE = {"supply.pressure": 5.64e5, "supply.reservoir_volume": 6e-4,
         "supply.regulator_conductance": 5e-9}
@@ -45,13 +40,7 @@ REL = 0.015
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    plant_file = synth.concealed_case("none", seed=0).write_nominal(
-        tmp_path_factory.mktemp("replay_check") / "plant.toml")
-    plant = Plant.from_toml(plant_file).with_friction("stick")
-    rec = foreign_rig.record(plant_file, synth.rich_reference(5, 8.0), 8.0, seed=5,
-                             overrides=TRUE)
-    prep = prepare(plant, rec)
-    by = {c.name: c for c in candidates(plant.params, ["supply_droop", "parameter_error"])}
+    plant, prep, by = supply_case(tmp_path_factory.mktemp("replay_check"), TRUE, 8.0)
     return plant, prep, nominal(prep, plant.params, True), by
 
 
@@ -84,7 +73,7 @@ def test_a_fall_the_long_refit_cannot_mend_is_said(case, monkeypatch):
     forced) the fall is a note naming each signal's fit with fewer findings and with
     all, and the values are left as they were."""
     plant, prep, nom, by = case
-    monkeypatch.setattr(refit_mod, "refit_on_replay", lambda *a, **k: None)
+    monkeypatch.setattr(refit_mod, "refit_set", lambda *a, **k: None)
     kept = _kept(by, prep.n, TRADED)
     (found, aug, _), note = _replay_check(prep, plant.params, kept, [], by, nom, 10, True)
     assert aug["supply.pressure"] == TRADED["supply.pressure"]

@@ -35,7 +35,7 @@ from .engine import Engine
 from .predict import Predictor
 
 __all__ = ["FitResult", "CandidateModel", "fit_candidate", "substeps_for", "directions",
-           "refit_on_replay", "MAX_STEP", "EXACT_JACOBIAN"]
+           "refit_set", "MAX_STEP", "EXACT_JACOBIAN"]
 
 #: s: largest ROS2 step (the chambers' fastest time constants are a few ms).
 MAX_STEP = 0.0025
@@ -196,25 +196,26 @@ def fit_candidate(prep: Prepared, params: PlantParams, cand: Candidate, shpe: Pr
                      err=shpe.error_by_sample(Y).astype(np.float32), corr=corr)
 
 
-def refit_on_replay(prep: Prepared, params: PlantParams, members: Sequence[Candidate],
-                    values: Mapping[str, float], replay: Predictor, max_nfev: int = 12,
-                    jit: bool = True) -> FitResult | None:
-    """The set ``members`` refitted jointly on the long replay ``replay`` (the
-    re-anchored closed-loop segments, :func:`.predict.segments`) from ``values``
+def refit_set(prep: Prepared, params: PlantParams, members: Sequence[Candidate],
+              values: Mapping[str, float], pred: Predictor, max_nfev: int = 12,
+              jit: bool = True) -> FitResult | None:
+    """The set ``members`` refitted jointly on the predictor ``pred`` from ``values``
     (candidate keys), or None when the members cannot be joined.
 
-    Why: the set search fits on short horizons (0.2 s from the measured state), which
-    see each member's fast signature but not what accumulates: values that trade off
-    there (a supply pressure and a droop's regulator conductance both set the
-    pressure reached in a transient) are told apart only by the level the loop settles
-    to over seconds. Used when the short-horizon values make the whole recording's
-    replay worse than a subset of the set does (:func:`.core._replay_check`).
+    Two uses (:mod:`.core`): on the long replay (the re-anchored closed-loop segments,
+    :func:`.predict.segments`) when the short-horizon values make the whole
+    recording's replay worse than a subset of the set does -- the set search fits on
+    0.2 s horizons, which see each member's fast signature but not what accumulates:
+    values that trade off there (a supply pressure and a droop's regulator conductance
+    both set the pressure a transient reaches) are told apart by the level the loop
+    settles to over seconds; and on the short horizons when a negligible member is
+    left out, the others having been fitted beside it.
     """
     from .combined import combine
     joint = combine(list(members), dict(values)) if len(members) > 1 else members[0]
     if joint is None:
         return None
-    return fit_candidate(prep, params, joint, replay, None, max_nfev=max_nfev, jit=jit,
+    return fit_candidate(prep, params, joint, pred, None, max_nfev=max_nfev, jit=jit,
                          start=dict(values))
 
 
