@@ -314,9 +314,7 @@ def _polish_findings(prep: Prepared, params: PlantParams, chosen: Sequence[Ranke
         after = _mean_fit(prep, params, [r.result.plant_values for r in chosen])
         before = _mean_fit(prep, params, [pv for _, pv, _, _ in refit])
         if not after >= before:
-            for r, (vals, pv, std, ci) in zip(chosen, refit):
-                r.result.values, r.result.plant_values = vals, pv
-                r.result.std, r.result.ci95 = std, ci
+            _restore(chosen, refit)
             polished = {"reverted": {"polished": polished, "mean_fit_polished": after,
                                      "mean_fit_refit": before}}
     return polished
@@ -335,8 +333,7 @@ def _mean_fit(prep: Prepared, params: PlantParams, plant_values: Sequence[Mappin
         from ..output import reraise_interrupt
         reraise_interrupt(exc)
         return -math.inf
-    vals = [v for v in fits.values() if math.isfinite(v)]
-    return float(np.mean(vals)) if vals else -math.inf
+    return _mean(fits)
 
 
 def _mean(fits: Mapping[str, float]) -> float:
@@ -381,8 +378,8 @@ def _without_negligible(prep: Prepared, params: PlantParams, chosen: Sequence[Ra
     from .refit import refit_set
     members = [by_name[r.name] for r in kept]
     res = refit_set(prep, params, members,
-                          {k: v for r in kept for k, v in r.result.values.items()},
-                          nom.shpe, max_nfev, jit)
+                    {k: v for r in kept for k, v in r.result.values.items()},
+                    nom.shpe, max_nfev, jit)
     if res is not None and res.error is None and np.isfinite(res.cost):
         _assign(kept, members, res)
     return kept
@@ -407,8 +404,8 @@ def _replay_check(prep: Prepared, params: PlantParams, kept: Sequence[Ranked],
     res = None
     if nom.seg is not None:
         res = refit_set(prep, params, members,
-                              {k: v for r in kept for k, v in r.result.values.items()},
-                              nom.seg, max_nfev, jit)
+                        {k: v for r in kept for k, v in r.result.values.items()},
+                        nom.seg, max_nfev, jit)
     if res is not None and res.error is None:
         old = _assign(kept, members, res)
         again = _findings(prep, params, kept, ranking, by_name, nom)
