@@ -33,12 +33,12 @@ def rig(tmp_path_factory):
     return plant_file, Plant.from_toml(plant_file)
 
 
-def _logged(plant_file, duration, seed, period, jitter):
+def _logged(plant_file, duration, seed, period, jitter, friction=None):
     """The foreign rig logged on its own clock, position only (20 um noise, 12 bits)."""
     ref = synth.rich_reference(seed, duration)
     t, Z, U, rng = foreign_rig.simulate_logged(plant_file, ref, duration, seed=seed,
-                                               friction=FRICTION, log_period=period,
-                                               jitter=jitter)
+                                               friction=friction or FRICTION,
+                                               log_period=period, jitter=jitter)
     lsb = 0.5 / 4096
     x = np.round((Z[:, 0] + rng.normal(0, 20e-6, len(t))) / lsb) * lsb
     return Recording.from_arrays(t, u=U, x=x, r=ref(t), metadata={"source": "foreign"})
@@ -71,11 +71,35 @@ def test_horizon_windows_keep_three_per_window_and_signal(rig):
 def test_short_position_only_recording_at_200_hz_names_the_friction(rig):
     """8 s at 200 Hz with +-20 % timing jitter: friction is named (was: no finding, with
     all candidates as with these two). The values of a position-only recording of a
-    hunting loop are loose (measured: Coulomb 12.9 N for 18 N), so only the effect is
-    asserted, and that nothing else is. Two candidates keep the test short (8.7 CPU s;
+    hunting loop are looser than with pressures, so here only the effect is asserted,
+    and that nothing else is (the values: the next test). Two candidates keep the test short (8.7 CPU s;
     all of them: 108 s wall on the loaded machine)."""
     from workbench.diagnose import diagnose
     plant_file, _ = rig
     rec = _logged(plant_file, 8.0, 7, 5e-3, 0.2)
     d = diagnose(plant_file, rec, effects=["dry_friction", "valve_deadband"], workers=1)
     assert [f.effect for f in d.findings] == ["dry_friction"], d.summary()
+
+
+@pytest.mark.parametrize("seed, friction", [
+    (7, FRICTION), (3, {"coulomb": 25.0, "static": 30.0, "stribeck": 0.02})],
+    ids=["18-26N", "25-30N"])
+def test_position_only_friction_values_come_from_the_lowest_cost(rig, seed, friction):
+    """Position only, 8 s at 200 Hz with +-20 % jitter: the Coulomb and static friction
+    within 30 % of the rig's (the issue's bound for one effect; the smooth law's peak
+    below F_s is 23.9 N for 18/26 N: tanh(v/2 mm/s) times the Stribeck curve).
+
+    The closed-loop segment cost is rough in the friction values (a break-away a
+    sample earlier changes the rest of a 1 s segment), so the least squares from the
+    best grid point stopped in a dent of it: 12.9/14.5 N (static -44 %) and 18.4/18.4 N
+    (-39 %); the pattern search of :func:`workbench.diagnose.refit._pattern_search`
+    reaches the lower cost near the rig's values (measured 19.5/25.9 N, 25.3/30.3 N).
+    """
+    from workbench.diagnose import diagnose
+    plant_file, _ = rig
+    rec = _logged(plant_file, 8.0, seed, 5e-3, 0.2, friction)
+    d = diagnose(plant_file, rec, effects=["dry_friction", "valve_deadband"], workers=1)
+    assert [f.effect for f in d.findings] == ["dry_friction"], d.summary()
+    found = d.findings[0].parameters
+    assert found["coulomb"] == pytest.approx(friction["coulomb"], rel=0.3), d.summary()
+    assert found["static"] == pytest.approx(friction["static"], rel=0.3), d.summary()
