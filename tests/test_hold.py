@@ -517,7 +517,8 @@ def test_only_laws_without_a_planning_horizon_aim():
 def test_aiming_unloads_a_piston_in_its_bin_beyond_a_quarter_of_the_sliding_friction():
     # a creeping friction turns the force the pulses leave into motion out of the bin;
     # unloading cannot move a stuck piston (its force only falls). Within F_c / 4 the
-    # hold leaves it (the loop's smallest opening would tick there)
+    # hold leaves it (the loop's smallest opening would tick there). Without aim (the
+    # NMPC) it is left until the piston has been seen to creep (the next test)
     fc = 15.0
     r = 0.25 + 0.2 * Q                              # in the bin of the level 0.25
     for force, aim, opens in ((6.0, True, True), (6.0, False, False), (3.0, True, False)):
@@ -530,3 +531,29 @@ def test_aiming_unloads_a_piston_in_its_bin_beyond_a_quarter_of_the_sliding_fric
             assert min(out) < 0.0 and max(out) <= 0.0, (force, aim)
         else:
             assert set(out) == {0.0}, (force, aim)
+
+
+def test_without_aim_a_held_piston_that_creeps_is_balanced_not_pulsed():
+    # the NMPC's hold (no aim): on a closed valve a piston whose friction creeps moves
+    # until the net force is zero (hold module, HoldPositioner._balance). Until a held
+    # piston has been seen to move with the valve closed its friction holds it: left
+    h = _hold(force_noise=0.3, force_band=2.5)
+    n = h.dwell_samples
+    r = 0.25 + 0.2 * Q                              # in the bin of the level 0.25
+    f = 2.0                                         # within the loop's band: not unloaded
+    push = _y(0.25, p_a=P0 + f / A)
+    s, out = _run(h, h.reset(), r, [push] * 4 * n)
+    assert s["mode"] == "locked" and set(out[1:]) == {0.0} and not s.get("creeps")
+    # it creeps a level up (0.8 quanta past r): seen, and held there (within one
+    # quantum of r a pulse's jump cannot land closer) with its force balanced: one
+    # sample opened against the whole force at the loop's rate, -F / (force_rate T),
+    # then two dwells' wait; the scripted pressures do not answer, so it acts again
+    s, out = _run(h, s, r, [{**push, "x": 0.25 + Q, "x_measured": 0.25 + Q}] * 6 * n)
+    assert s["creeps"] and s["mode"] == "locked" and s["pulses"] == 0
+    nz = [(i, u) for i, u in enumerate(out) if u != 0.0]
+    assert [u for _, u in nz] == pytest.approx([-f / (3e4 * 0.002)] * len(nz), rel=1e-9)
+    assert len(nz) >= 2 and [i for i, _ in nz] == list(range(nz[0][0], 6 * n, 2 * n + 1))
+    # the force answered and overshot to -0.5 N (within one sample's 0.6 N, beyond the
+    # threshold max(0.3 N, 4 x 0.3 N / sqrt(n))): not reversed (a reversal ticks)
+    s, out = _run(h, s, r, [_y(0.25 + Q, p_a=P0 - 0.5 / A)] * 4 * n)
+    assert set(out) == {0.0} and s["mode"] == "locked"

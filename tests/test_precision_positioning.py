@@ -278,7 +278,13 @@ def test_perturbed_rig_ends_at_rest(perturbed):
     "1.2x/1.3x/1.45x/1.5x/1.7x end 0.12/0.06/0.21/0.20/0.08 mm with a hold still "
     "pulsing in its second half (47/25/18/11/7 command changes), 1.0x and 1.55x pass: "
     "a break-away jump of 1-3 quanta makes where a stop lands a lottery (module "
-    "docstring)"))
+    "docstring). d69980b and h14q (bit-identical here: the creep balance acts only "
+    "once a held piston has moved, which Karnopp friction never lets happen), seed 0, "
+    "one loaded machine: 1.0x/1.2x pass (0.105/0.057 mm), 1.3x/1.45x/1.5x/1.55x/1.7x "
+    "fail in the hold after the first step (19/11/19/16/20 command changes in its "
+    "second half, 0.16-0.48 mm p-p; worst steady state 0.30/0.19/0.10/0.12/0.35 mm): "
+    "the pulses grow from the file's F_s until one breaks the piston away, and that one "
+    "jumps it 4 quanta (1.3x: strength 1.17, 0.49 mm, in the lines' ringing)"))
 def test_perturbed_rig_settles_without_limit_cycle(perturbed):
     ev = perturbed
     assert max(h["steady_state_error"] for h in _steps(ev)) <= ev.quantum
