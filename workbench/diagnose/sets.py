@@ -33,7 +33,12 @@ inside the best pair and the best triple are refitted again from that set's valu
 with the member left out at its neutral values (:func:`_project_pairs`,
 :func:`_project`). ``parameter_error`` candidates (mass, viscous friction,
 valve conductance, supply pressure) are members like any effect, so wrong nominal
-values compete with new physics on the same footing.
+values compete with new physics on the same footing. Nor is a set chosen against which
+another admissible set predicts every recorded chamber pressure significantly better
+(:func:`_pressures_better`): the pressures are what pneumatic effects act on and what
+moves the piston, so a set that wins the position with every pressure worse makes up
+for a timing (a delay-free spool lag for a line's transport delay), and the position's
+small noise lets it win the sum alone.
 
 Each member's **own share** is ``(J_{S without m} - J_S) / J_0`` (the part of the
 nominal mismatch only it removes), also given as a share of what the others leave,
@@ -184,8 +189,10 @@ def search(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked]
     info["leak_floor"] = floor.to_dict() if floor is not None else None
     info["leak_in_chambers"] = witnessed
     info["pressure_rivals"] = rivals
+    # a set passed over for its pressures is told apart by them: no alternative
+    passed = {tuple(r["set"]) for r in rivals}
     alts = [s for s in scores.values() if best and s is not best and s.names and s.earns
-            and s.bic - best.bic < DBIC_MIN]
+            and s.bic - best.bic < DBIC_MIN and s.names not in passed]
     info["alternatives"] = [list(s.names) for s in alts]
     info["alternatives_tell_apart"] = [
         {"set": list(s.names), "dbic": s.bic - best.bic,
