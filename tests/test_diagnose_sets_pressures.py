@@ -24,7 +24,10 @@ import pytest
 from workbench.diagnose.refit import FitResult
 from workbench.diagnose.sets import SetScore, _select
 
-#: Effective observations of the 12 s, 1 kHz recording (its 0.2 s horizons, 3 signals).
+#: Effective observations of the 12 s, 1 kHz recording (3 per 0.2 s horizon and signal:
+#: ~44 per second, as the 8 s recording of test_diagnose_sets_third has 351). Every
+#: conclusion below holds for any n within a factor 2 of this (the pressure criteria
+#: differ by 100-200, the 2 % case by 3.6 at this n, 7.1 at twice it, against 10).
 N_EFF = 540.0
 LAG, LINES = ("valve_dynamics",), ("line_dynamics",)
 #: Per-signal costs measured (ROS4, 6-segment candidate lines): the nominal model, the
