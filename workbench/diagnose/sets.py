@@ -33,7 +33,12 @@ inside the best pair and the best triple are refitted again from that set's valu
 with the member left out at its neutral values (:func:`_project_pairs`,
 :func:`_project`). ``parameter_error`` candidates (mass, viscous friction,
 valve conductance, supply pressure) are members like any effect, so wrong nominal
-values compete with new physics on the same footing.
+values compete with new physics on the same footing. Nor is a set chosen against which
+another admissible set predicts every recorded chamber pressure significantly better
+(:func:`_pressures_better`): the pressures are what pneumatic effects act on and what
+moves the piston, so a set that wins the position with every pressure worse makes up
+for a timing (a delay-free spool lag for a line's transport delay), and the position's
+small noise lets it win the sum alone.
 
 Each member's **own share** is ``(J_{S without m} - J_S) / J_0`` (the part of the
 nominal mismatch only it removes), also given as a share of what the others leave,
@@ -166,8 +171,9 @@ def search(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked]
     prep = getattr(refits, "prep", None)         # None: refits without a recording (tests)
     floor = LeakFloor.of(prep, refits.shpe) if prep is not None else None
     witnessed: list[dict[str, Any]] = []
+    rivals: list[dict[str, Any]] = []
     best = _select(scores, nothing.cost, by, floor, n,
-                   _leak_witness(prep, by, witnessed) if floor is not None else None)
+                   _leak_witness(prep, by, witnessed) if floor is not None else None, rivals)
     chosen = _as_chosen(best, scores, by, nothing, refits) if best else \
         Chosen.nothing(nothing.cost, nothing.seg_cost, nothing.err)
     info = {"sets": [{"set": list(s.names), "cost": s.cost, "k": s.k, "bic": s.bic,
@@ -182,8 +188,11 @@ def search(refits: Refits, cands: Sequence[Candidate], ranking: Sequence[Ranked]
     info["suggested"] = suggested(best, scores, by, floor, n) if best else []
     info["leak_floor"] = floor.to_dict() if floor is not None else None
     info["leak_in_chambers"] = witnessed
+    info["pressure_rivals"] = rivals
+    # a set passed over for its pressures is told apart by them: no alternative
+    passed = {tuple(r["set"]) for r in rivals}
     alts = [s for s in scores.values() if best and s is not best and s.names and s.earns
-            and s.bic - best.bic < DBIC_MIN]
+            and s.bic - best.bic < DBIC_MIN and s.names not in passed]
     info["alternatives"] = [list(s.names) for s in alts]
     info["alternatives_tell_apart"] = [
         {"set": list(s.names), "dbic": s.bic - best.bic,
@@ -504,14 +513,16 @@ def _leak_witness(prep: Any, by: Mapping[str, Candidate],
 
 def _select(scores: Mapping[tuple[str, ...], SetScore], cost0: float,
             by: Mapping[str, Candidate] | None = None, floor: LeakFloor | None = None,
-            n: float | None = None, witness: Callable[[SetScore], bool] | None = None
-            ) -> SetScore | None:
+            n: float | None = None, witness: Callable[[SetScore], bool] | None = None,
+            rivals: list[dict[str, Any]] | None = None) -> SetScore | None:
     """The lowest-BIC set in which every member earns its place (a nominal-value
     correction also by changing a value by :data:`MIN_CORRECTION`), significant against
     the nominal model (dBIC, share removed, closed loop not worse); None: nothing.
     ``witness(s)`` (:func:`_leak_witness`), tried from the lowest BIC on: a set it
     rejects loses its place to the next (a leak that does not show in the force-free
-    chamber estimates is not named, whatever prediction cost it removes)."""
+    chamber estimates is not named, whatever prediction cost it removes). A set
+    against which another admissible set predicts every recorded pressure significantly
+    better (:func:`_pressures_better`) is passed over too, and logged in ``rivals``."""
     by = by or {}
     empty = scores[()]
     for s in scores.values():
@@ -531,11 +542,58 @@ def _select(scores: Mapping[tuple[str, ...], SetScore], cost0: float,
           and empty.bic - s.bic >= DBIC_MIN and (cost0 - s.cost) / cost0 >= GAIN_MIN
           and not (s.seg_cost is not None and empty.seg_cost
                    and (empty.seg_cost - s.seg_cost) / empty.seg_cost < SEG_WORSE)]
+    seen: dict[tuple[str, ...], bool] = {}
+
+    def witnessed(s: SetScore) -> bool:
+        if s.names not in seen:
+            seen[s.names] = witness is None or witness(s)
+            s.earns = s.earns and seen[s.names]
+        return seen[s.names]
+
     for s in sorted(ok, key=lambda s: s.bic):
-        if witness is None or witness(s):
+        beaten = [r for r in ok if r is not s and n is not None
+                  and _pressures_better(r, s, n) and witnessed(r)]
+        if beaten:
+            if rivals is not None:
+                rivals.append({"set": list(s.names), "rival": list(beaten[0].names),
+                               "signal_costs": dict(s.result.signal_costs),
+                               "rival_signal_costs": dict(beaten[0].result.signal_costs)})
+            continue
+        if witnessed(s):
             return s
-        s.earns = False
     return None
+
+
+def _pressures_better(rival: SetScore, s: SetScore, n: float) -> bool:
+    """Whether ``rival`` predicts every recorded chamber pressure significantly better
+    than ``s`` (each pressure's information criterion over its ``n / signals``
+    observations lower by :data:`DBIC_MIN`, as :func:`_worsens` judges one signal):
+    then ``s`` is no explanation of the pressures, whatever it gains on the position.
+
+    Why: the chamber pressures are the state every pneumatic effect (valve, lines,
+    supply, leak, heat) acts on, and the piston moves by them (force = the pressures
+    times the areas, through the load's mass and friction); a mechanical effect changes
+    the pressures through the chamber volumes the motion sweeps, so an effect that is
+    right for the motion is right for the pressures too. A set that fits the position
+    better while fitting every pressure worse than a rival gets the motion from wrong
+    pressures: it makes up for a timing, not for the physics. The cost sums the signals
+    in noise units and the position's noise is small beside its dynamics (a fraction of
+    a quantum of a 12-bit sensor), so such a set can win the sum on the position alone.
+    Measured (session 11, ROS4 and 6-segment candidate lines, tests/foreign_rig.py's
+    one-section lumped line of 2.5 m x 4 mm): a 228 Hz, damping 3 spool lag alone, an
+    effective 4 ms first-order lag imitating the line's 7.3 ms transport delay, x 308
+    against the lines' 627 noise units, p_a 22.6 / p_b 11.4 against 8.1 / 4.3; it was
+    named instead of the lines. This is :func:`_worsens` between rival sets rather than
+    nested ones (a member that trades signals beside the others does not earn its
+    place; a set that trades every pressure for the position against a rival is not
+    chosen over it). Without a recorded pressure (position only) it never applies."""
+    a, b = _signal_costs(s, rival)
+    pressures = [k for k in a if k != "x"]
+    if not pressures:
+        return False
+    n_s = n / len(a)
+    return all(a[k] > 0 and b[k] > 0 and n_s * math.log(a[k] / b[k]) >= DBIC_MIN
+               for k in pressures)
 
 
 def _as_chosen(best: SetScore, scores: Mapping[tuple[str, ...], SetScore],
