@@ -124,8 +124,14 @@ class DesignEvaluation:
         """Every hold: over its second half, peak-to-peak within one quantum and at
         most ``LOCK_EVENTS`` command changes (the lock closing the valve once is two:
         the last correction and the close; a limit cycle changes it every period)."""
-        return all(h["peak_to_peak"] <= h["quantum"] + 1e-12
-                   and h["command_changes"] <= LOCK_EVENTS for h in self.holds)
+        return not self.holds_not_at_rest
+
+    @property
+    def holds_not_at_rest(self) -> list[dict[str, Any]]:
+        """The holds that fail :attr:`limit_cycle_free`'s test (in profile order)."""
+        return [h for h in self.holds
+                if not (h["peak_to_peak"] <= h["quantum"] + 1e-12
+                        and h["command_changes"] <= LOCK_EVENTS)]
 
     def command_activity(self, sections=None, window: float = 0.025) -> float:
         """V, std of the command minus its ``window`` s moving mean (centred), over the
