@@ -85,14 +85,14 @@ def test_engine_converges_on_cvodes_with_lines(line_run):
 
 
 def test_candidate_line_structure_within_the_position_noise():
-    """A 3-segment chain (the diagnosis's line candidate until session 12), 3 m of 4 mm tubing,
-    the same window from the true state, ROS4 at the step count it sizes (one per 2 ms
-    sample here: fastest mode ~620 1/s): within 40 um rms of CVODES (a 12-bit position
-    sensor over 0.5 m has 35 um rms of quantisation alone; measured 21 um), and
-    converging at fourth order: 1.1 um at two steps per sample, 0.03 um at 16 (bounds 3
-    um and 0.3 um). ROS2 at one step per sample, the engine's method for lines until
-    session 12, misses by more than 0.3 mm rms (measured 615 um); why it was kept until
-    then and why ROS4 replaced it: :data:`~workbench.diagnose.engine.LINE_TABLEAU`."""
+    """The diagnosis's line candidate (3 segments per line), 3 m of 4 mm tubing, the same
+    window from the true state, ROS4 at the step count it sizes (one per 2 ms sample
+    here: fastest mode ~620 1/s): within 40 um rms of CVODES (a 12-bit position sensor
+    over 0.5 m has 35 um rms of quantisation alone; measured 21 um), and converging at
+    fourth order: 1.1 um at two steps per sample, 0.03 um at 16 (bounds 3 um and
+    0.3 um). ROS2 at one step per sample, the engine's method for lines, misses by more
+    than 0.3 mm rms (measured 615 um): why it stays the method for lines all the same,
+    :data:`~workbench.diagnose.engine.LINE_TABLEAU`."""
     plant, t, S, u = _line_run(3.0, 0.004, segments=3)
     k0, n = 460, 100
     x_ref = S[k0:k0 + 2 * n:2, plant.state_index("x")]

@@ -34,14 +34,8 @@ JOINT_NOMINAL = "parameter_error:nominal values"
 #: (:func:`workbench.diagnose.engine.stiff_substeps`), whatever the fit's start.
 SPOOL_BANDWIDTH_MAX = 400.0
 #: Lumped segments per line in the fitted line model (the length is what matters
-#: for volume, delay and attenuation; more segments add the wave detail: a line's
-#: transport delay L/a and its quarter-wave resonance, which a coarse chain smears).
-#: 6 since session 12 (was 3): against a 15-segment recording of 3.62 m lines the
-#: 3-segment form missed x by 112 um and p by 267 Pa rms in 0.2 s windows, 6 segments
-#: by 42 um and 104 Pa (session 10); stepped by ROS4 at the steps
-#: :func:`~workbench.diagnose.engine.stiff_substeps` sizes
-#: (:data:`~workbench.diagnose.engine.LINE_TABLEAU`).
-LINE_SEGMENTS = 6
+#: for volume, delay and attenuation; more segments only add wave detail).
+LINE_SEGMENTS = 3
 
 
 @dataclass(frozen=True)

@@ -22,9 +22,8 @@ unpivoted sparse LU of :mod:`workbench.integrate.linalg` written out in SX, at
 one step per sample. A spool lag (linear, driven by the command alone) is stepped
 exactly and the rest of the plant along its exact motion (:func:`_split_spool`), at
 the steps :func:`stiff_substeps` sizes for the spool candidate's 400 Hz bound. A plant
-with line dynamics is stepped by ROS4 too, at the steps :func:`stiff_substeps` sizes for
-the lines' fastest mode (ROS2 at one step per sample until session 12; why it changed:
-:data:`LINE_TABLEAU`). ROS2's error was the replay
+with line dynamics is stepped by ROS2 (Verwer et al. 1999, order 2) at one step per
+sample, as every plant was until session 10 (why: :data:`LINE_TABLEAU`). ROS2's error was the replay
 floor the diagnosis' extra effects absorbed (67 um rms in x for the exact model of
 the 25 mm rig; :data:`TABLEAU` for the figures now). Positive diagonal entries of the
 Jacobian (the negative damping of a Stribeck friction curve) are left out of the
@@ -115,9 +114,8 @@ EXPLICIT_LIMIT = 0.4
 #: lines) is now SX with that LU too, not MX with a dense QR (0.15 against 0.50 CPU s
 #: for 6 s of replay).
 TABLEAU = ROS4
-#: The method for a plant with line dynamics: ROS4 at the steps :func:`stiff_substeps`
-#: sizes (since session 12; ROS2 -- Verwer et al. 1999, order 2, L-stable, a W-method --
-#: at the given steps per sample until then, for the reasons below). ROS4 with
+#: The method for a plant with line dynamics: ROS2 (Verwer et al. 1999, order 2,
+#: L-stable, a W-method) at the given steps per sample, as until session 10. ROS4 with
 #: :func:`stiff_substeps` replays the diagnosis's 3-segment lines within 1.2 um of
 #: CVODES (3.62 m, 3.6 mm; ROS2: 50 um rms) but made the chain's own form show: on the
 #: foreign rig's one-section lumped line (tests/test_diagnose_lines.py) the pair lines +
@@ -139,18 +137,14 @@ TABLEAU = ROS4
 #: which the one-section lumped model lacks and a lag without delay imitates in x. Row
 #: 14 (offset + lines) stayed named right with the lag said, at 3.4x the time; row 23
 #: (lines + supply droop) named the lines only, the droop no longer even said, at 14x
-#: the time (1292 against 94 s, loaded). Session 12 made the selection weigh that
-#: trade (:func:`workbench.diagnose.sets._pressures_better`: a set that every recorded
-#: pressure of a rival out-explains is passed over) and adopted ROS4 with 6-segment
-#: candidate lines (:data:`~workbench.diagnose.candidates.LINE_SEGMENTS`): the foreign
-#: lumped line alone is now named as lines of 2.30 m, 5.05 mm (true 2.5 m, 4 mm; with
-#: ROS2 and 3 segments: 1.13 m, 4.7 mm beside a spurious 35 Hz spool lag). A spool lag
+#: the time (1292 against 94 s, loaded). So ROS2
+#: for lines until the selection weighs that trade (sets.py). A spool lag
 #: was on ROS2 too until session 11: one ROS4 step per 2 ms sample of the spool as an
 #: ordinary state (h omega ~5 at the 400 Hz a fit may move to) kept its mode weakly
 #: damped in a wrong phase (|R(iy)| 0.52 at y = 4), and the single-effect bench case
 #: (concealed dry friction) fitted dry friction + a spurious 222 Hz lag; now the spool
 #: is stepped exactly (:func:`_split_spool`) with ROS4 for the rest.
-LINE_TABLEAU = ROS4
+LINE_TABLEAU = ROS2
 #: |C3| of ROS2's local error C3 h^3 J^2 f (the ``inexact`` flag of a ROS2 step).
 ROS2_C3 = 1.0 / 6.0 - (4.0 * (1.0 + 0.5 ** 0.5) ** 3 - (1.0 + 2.0 ** 0.5) * 3.0
                        * (1.0 + 0.5 ** 0.5) ** 2)
