@@ -263,7 +263,8 @@ def test_a_pairs_scan_takes_each_members_grid_on_top_of_the_best_so_far():
     def cost(vals):
         return 1e4 * (vals["valve.deadband"] - 0.05) ** 2 \
             + 1e2 * (vals["valve.null_offset"] - 0.2) ** 2
-    obj = SimpleNamespace(cand=pair, cost=cost,
+    # a short-horizon objective (pressures recorded): no pattern search after the scan
+    obj = SimpleNamespace(cand=pair, cost=cost, shpe=SimpleNamespace(kind="horizons"),
                           lo=np.array([f.z_bounds[0] for f in pair.free]),
                           hi=np.array([f.z_bounds[1] for f in pair.free]))
     z0, grid = _start_point(obj, None)
