@@ -296,8 +296,7 @@ def _polish_findings(prep: Prepared, params: PlantParams, chosen: Sequence[Ranke
     """
     from .polish import polish
     polished: dict[str, Any] = {}
-    refit = [(r.result.values, r.result.plant_values, r.result.std, r.result.ci95)
-             for r in chosen]
+    refit = _snapshot(chosen)
     for i, r in enumerate(chosen):
         cand = by_name[r.name]
         base = params.replace(**{k: v for j, o in enumerate(chosen) if j != i
@@ -345,8 +344,7 @@ def _mean(fits: Mapping[str, float]) -> float:
 def _assign(kept: Sequence[Ranked], members: Sequence[Candidate], res: Any) -> list[tuple]:
     """Each finding of ``kept`` takes its values from the joint fit ``res``; returns the
     values it had (for :func:`_restore`)."""
-    old = [(r.result.values, r.result.plant_values, r.result.std, r.result.ci95)
-           for r in kept]
+    old = _snapshot(kept)
     for r, m in zip(kept, members):
         keys = [f.key for f in m.free]
         r.result.values = {k: res.values[k] for k in keys}
@@ -354,6 +352,12 @@ def _assign(kept: Sequence[Ranked], members: Sequence[Candidate], res: Any) -> l
         r.result.std = {k: v for k, v in res.std.items() if k in keys}
         r.result.ci95 = {k: v for k, v in res.ci95.items() if k in keys}
     return old
+
+
+def _snapshot(kept: Sequence[Ranked]) -> list[tuple]:
+    """Each finding's values, plant values, std and ci95 (for :func:`_restore`)."""
+    return [(r.result.values, r.result.plant_values, r.result.std, r.result.ci95)
+            for r in kept]
 
 
 def _restore(kept: Sequence[Ranked], old: Sequence[tuple]) -> None:
