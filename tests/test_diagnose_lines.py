@@ -58,11 +58,12 @@ def test_lumped_lines_beside_a_valve_offset_are_named_not_a_lag(plant_file):
     """Two effects at once on the foreign lumped line: a 0.15 V valve offset beside it,
     both named, the offset within 10 % and the line length within the issue's 30 %.
     Measured (session 12, h12o; 3-segment candidate lines stepped by ROS2): offset
-    0.150 V, lines 1.87 m, 5.29 mm. With 6 segments stepped by ROS4 the offset + spool
-    lag pair predicted the position about as well as offset + lines (422.7 against
+    0.150 V, lines 1.87 m, 5.29 mm. With the same 3 segments stepped by ROS4 (session
+    12 reported it as 6 segments; its script's segment count did not take) the offset +
+    spool lag pair predicted the position about as well as offset + lines (422.7 against
     420.9 noise units) but p_a 35.5 / p_b 10.8 against 10.0 / 3.3: the pressure rule of
     sets._pressures_better is what keeps the lines there (lines 2.30 m, 5.02 mm); that
-    engine was measured, not adopted (2.5-14x the diagnosis time with lines)."""
+    step was measured, not adopted (engine.LINE_TABLEAU)."""
     d = diagnose(plant_file, _record(plant_file, overrides={**LINES, "valve.null_offset": 0.15},
                                      line_model="lumped"),
                  effects=("line_dynamics", "valve_dynamics", "valve_offset"))

@@ -144,6 +144,26 @@ TABLEAU = ROS4
 #: damped in a wrong phase (|R(iy)| 0.52 at y = 4), and the single-effect bench case
 #: (concealed dry friction) fitted dry friction + a spurious 222 Hz lag; now the spool
 #: is stepped exactly (:func:`_split_spool`) with ROS4 for the rest.
+#:
+#: Session 13 (h12q) correction: session 12's "6 segments stepped by ROS4" numbers for
+#: the foreign lumped line (lines alone, 2.30 m / 5.05 mm; with a 0.15 V offset
+#: 2.30 m / 5.02 mm) were measured with **3** segments: the script set
+#: ``candidates.LINE_SEGMENTS`` on the *function* ``workbench.diagnose.candidates``
+#: (the package's name for it shadows the module), so only LINE_TABLEAU changed, and
+#: its output said "chain of 3 segments". ROS4 at :func:`stiff_substeps` with 3
+#: segments, re-run, gives the same values to every digit (2.29944 m; set costs 418.0 /
+#: 342.2 / 138.5): the gain over ROS2 is the accurate step, not the segment count.
+#: Its accuracy (x rms against scipy Radau, rtol 1e-8, over 0.2 s windows from the true
+#: state, 3 segments of 5 mm tubing, 2 ms samples; /tmp/h12q/acc.py): 2.3 m ROS2 x1
+#: 968 um, ROS4 x1 21, x2 (the count sized) 3.4; 1.0 m ROS2 1387, ROS4 x1 225, x2 18,
+#: x4 2.5 (sized 3); 0.3 m ROS2 692, ROS4 x1 13 mm, x4 7.8 (sized 9); 0.12 m ROS2 288,
+#: ROS4 x4 317, x16 4.1 (sized 21). A short line needs many steps (a set fitted at
+#: 0.12 m ran its engine at 21 per sample). Per step (SX instructions, 3 / 6
+#: segments): ROS2 2607 / 3843, ROS4 3644 / 5432. Not adopted for its time:
+#: tests/test_diagnose_lines.py + test_diagnose_lines_replay.py 414 -> 441 s wall,
+#: 199 -> 226 CPU s (lumped line 196 -> 27 s, lumped line + offset 106 -> 227 s,
+#: position only 58 -> 99 s, friction + lines 41 -> 71 s; same loaded machine, one
+#: after the other).
 LINE_TABLEAU = ROS2
 #: |C3| of ROS2's local error C3 h^3 J^2 f (the ``inexact`` flag of a ROS2 step).
 ROS2_C3 = 1.0 / 6.0 - (4.0 * (1.0 + 0.5 ** 0.5) ** 3 - (1.0 + 2.0 ** 0.5) * 3.0
