@@ -317,6 +317,8 @@ class HoldPositioner:
                 for sign in "+-":
                     s["lo" + sign] = 0.8 * s.get("lo" + sign, 0.0)
                     s["hi" + sign] = 1.25 * s.get("hi" + sign, math.inf)
+                    if s.get("short" + sign):
+                        s["short" + sign] = (0.8 * s["short" + sign][0], s["short" + sign][1])
             s["mode"], s["pending"], s["tries"], s["hops"], s["best"] = TRACK, False, 0, 0, math.inf
             s["bal"] = 0.0
             return s, None
@@ -525,6 +527,8 @@ class HoldPositioner:
         counts as too weak (``lo``): kept, a piston stuck 7 quanta short was walked in
         one quantum per pulse, 80 ms apart, into the hold's second half (FL, precision
         profile --quick, hold after the 0.5 s step: 40 command changes there).
+        Without ``aim`` such a pulse is kept with its move (``short``) and is the lower
+        end only while more is left than it moved (:meth:`_next`).
         """
         key = "lo+" if s["dir"] > 0 else "lo-"
         lo, hi = s.get(key, 0.0), s.get("hi" + key[2], math.inf)
@@ -545,7 +549,10 @@ class HoldPositioner:
         else:                                             # closer: not counted as a try
             s["tries"] = max(0, s.get("tries", 0) - 1)
             if moved < abs(e) / self.quantum:             # not half way: too weak
-                lo = max(lo, a)
+                if self.aim:
+                    lo = max(lo, a)
+                elif a >= s.get("short" + key[2], (0.0, 0.0))[0]:
+                    s["short" + key[2]] = (a, moved)      # too weak while farther (_next)
         if lo >= hi:                                      # outcomes scatter: reopen
             lo, hi = 0.8 * hi, 1.25 * lo
         s[key], s["hi" + key[2]] = lo, hi
@@ -587,7 +594,7 @@ class HoldPositioner:
         pulses cost 80 ms each: a PID or FL piston 2 mm off walked into the hold's
         second half)."""
         if not self.aim:
-            return self._next(s, direction)
+            return self._next(s, direction, e)
         sign = "+" if direction > 0 else "-"
         if (self.far_amplitude > 0 and abs(e) > FAR * self.quantum
                 and not s.get("seen" + sign) and self._next(s, direction) == self.amplitude):
@@ -627,7 +634,7 @@ class HoldPositioner:
         j_hi, a_hi = min((j, -a) for a, j in above)
         return a_lo * (-a_hi / a_lo) ** ((d - j_lo) / (j_hi - j_lo))
 
-    def _next(self, s: dict, direction: float) -> float:
+    def _next(self, s: dict, direction: float, e: float | None = None) -> float:
         """Strength of a pulse in ``direction`` from that direction's bracket.
 
         Without a ``hi`` the strength grows x ``grow``, but beyond full opening by at
@@ -637,9 +644,23 @@ class HoldPositioner:
         opening put the first bump that broke the piston away 20 N above its static
         friction and jumped it 1.2 mm (friction 1.5x: 0.31 mm with the cap, the
         hold's steady state 0.38 -> 0.04 mm).
+
+        Without ``aim``, ``e`` (m, r - x): a pulse that moved the piston towards r but
+        less than the distance then left (too weak, :meth:`_adapt`) is the lower end
+        only while the distance left now is more than it moved; nearer, the same pulse
+        carries the piston past r's bin (moves grow with the strength), and a bisection
+        above it can only overshoot again. Precision profile --quick, NMPC seed 0,
+        hold at 50 mm: 0.287 moved the piston 3 quanta of 6.6 and stayed the lower
+        end when the piston was 0.6 quanta off; 0.351 then jumped it 5 quanta past,
+        the hold's pulses ran into its second half (10 command changes, 0.216 mm
+        peak-to-peak); without it 0.258, and the hold was locked 5 um off at 16.02 s.
         """
         sign = "+" if direction > 0 else "-"
         lo, hi = s.get("lo" + sign, 0.0), s.get("hi" + sign, math.inf)
+        short = s.get("short" + sign)
+        if (e is not None and short is not None and short[0] < hi
+                and short[1] < abs(e) / self.quantum):
+            lo = max(lo, short[0])                 # moved less than is left: too weak
         if lo > 0 and math.isfinite(hi):
             return math.sqrt(lo * hi)
         if lo > 0:
