@@ -11,7 +11,9 @@ For one :class:`~.candidates.Candidate` on the nominal plant:
    steps large enough to see through stick-slip as its Jacobian (or, with
    :data:`EXACT_JACOBIAN`, the replay's exact forward sensitivities);
 4. standard deviations and 95 % intervals from the Gauss-Newton covariance, the
-   residual variance inflated by the correlation of the residuals within a window;
+   residual variance inflated by the correlation of the residuals within a window; an
+   interval is widened to every value the fit evaluated whose cost lies inside the
+   likelihood-ratio region (:func:`_evaluated_span`: a flat or rough cost);
 5. the cost of the re-anchored closed-loop replay (:func:`.predict.segments`) at the
    fitted values, an independent check of the gain.
 """
@@ -186,7 +188,9 @@ def fit_candidate(prep: Prepared, params: PlantParams, cand: Candidate, shpe: Pr
     z, J, message = _least_squares(obj, z0, max_nfev)
     vals = cand.values(z)
     Y = obj.outputs(z)                  # the solution's replay, kept by the objective
-    std, ci, corr = _uncertainty(cand.free, vals, J, shpe.residuals(Y), shpe.n_eff)
+    r = shpe.residuals(Y)
+    std, ci, corr = _uncertainty(cand.free, vals, J, r, shpe.n_eff)
+    ci = _evaluated_span(obj, r, ci)
     seg_cost = seg.cost(model.run(seg, vals)) if seg is not None else None
     return FitResult(name=cand.name, effect=cand.effect, k=cand.k, values=vals, std=std, ci95=ci,
                      cost=shpe.cost(Y), signal_costs=shpe.signal_costs(Y), seg_cost=seg_cost,
@@ -399,14 +403,11 @@ def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
     variance ``s2`` inflated by the correlation of the residuals within a window
     (``len(r) / n_eff``, at least 1), mapped back through each value's transform.
     """
-    m = len(r)
-    dof = max(m - len(free), 1)
-    s2 = float(r @ r) / dof
-    infl = max(m / n_eff, 1.0)
+    s2 = _residual_variance(r, len(free), n_eff)
     std: dict[str, float] = {}
     ci: dict[str, tuple[float, float]] = {}
     try:
-        cov = np.linalg.pinv(J.T @ J) * s2 * infl
+        cov = np.linalg.pinv(J.T @ J) * s2
     except np.linalg.LinAlgError:                           # pragma: no cover
         return std, ci, {}
     for i, f in enumerate(free):
@@ -425,6 +426,52 @@ def _uncertainty(free: Sequence[Free], vals: Mapping[str, float], J: np.ndarray,
         if d[i] > 0 and d[j] > 0:
             corr[(free[i].key, free[j].key)] = float(cov[i, j] / (d[i] * d[j]))
     return std, ci, corr
+
+
+def _residual_variance(r: np.ndarray, k: int, n_eff: float) -> float:
+    """Variance of one weighted residual with ``k`` fitted values, inflated by the
+    correlation of the residuals within a window (``len(r) / n_eff``, at least 1)."""
+    m = len(r)
+    return float(r @ r) / max(m - k, 1) * max(m / n_eff, 1.0)
+
+
+#: 95 % quantile of chi-square with one degree of freedom: a value lies inside its
+#: profile-likelihood interval when the best fit holding it costs at most this many
+#: residual variances more than the best fit overall.
+CHI2_95_1 = 3.841458820694124
+
+
+def _evaluated_span(obj: "_Objective", r: np.ndarray, ci: Mapping[str, tuple[float, float]]
+                    ) -> dict[str, tuple[float, float]]:
+    """The 95 % intervals ``ci`` widened to each value of every point the fit evaluated
+    (grid scan, pattern search, least-squares steps) whose residual sum of squares lies
+    within :data:`CHI2_95_1` residual variances of the lowest evaluated.
+
+    Why: the Gauss-Newton interval is the curvature at the solution, which a flat or
+    rough cost does not have: on a position-only recording (the closed-loop segment
+    objective) the friction cost is flat along a valley and rough across it, and the
+    interval came out 25.6-26.2 N where values of 13-29 N fit within a few percent. A
+    point inside the likelihood-ratio region is a witness: the profile likelihood at
+    its value of any one parameter (the best over the others) is at least as good, so
+    that value belongs to the profile interval. The span of witnesses is therefore a
+    lower bound on the profile interval, computed from replays already made.
+    """
+    cand = obj.cand
+    s2 = _residual_variance(r, cand.k, obj.shpe.n_eff)
+    pts = [(float(res @ res), key) for key, res in obj._cache.items()]
+    if not pts or not (s2 > 0.0 and math.isfinite(s2)):
+        return dict(ci)
+    floor = min(min(c for c, _ in pts), float(r @ r))
+    out = dict(ci)
+    for c, key in pts:
+        if not c <= floor + CHI2_95_1 * s2:
+            continue
+        z = np.clip(np.frombuffer(key, dtype=float), obj.lo, obj.hi)
+        for f, v in cand.values(z).items():
+            if f in out:
+                a, b = out[f]
+                out[f] = (min(a, float(v)), max(b, float(v)))
+    return out
 
 
 def _at_bound(free: Sequence[Free], z: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[str]:
