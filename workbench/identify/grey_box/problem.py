@@ -53,7 +53,7 @@ def _step_functions(model: Plant, nsel: int, out_idx: Sequence[int], stages: int
     # sparse QR factorised at run time, also compiled (the generated C of CasADi's
     # "qr" linear solver: ~6 s of gcc once per plant structure, cached on disk, for
     # 2-3x cheaper sensitivities and 3-4x cheaper replays than the virtual machine;
-    # /tmp/h12r/micro_gb.py, session 13).
+    # notes/s13/h12r_scripts/micro_gb.py, session 13).
     large = stages * nx > LARGE_SYSTEM
     T = ca.MX if large else ca.SX
     X = T.sym("X", nx)
