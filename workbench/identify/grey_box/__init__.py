@@ -27,8 +27,8 @@ Jacobian; the sensitivities of each step with respect to its start state and to 
 parameters are exact for the stage equations (implicit function theorem) and are
 propagated through the interval in the same compiled function. The step is generated
 as C and compiled once per plant structure and number of parameters
-(:mod:`workbench.integrate.jit`, cached on disk); plants with many states (line segments) use a
-sparse LU at run time instead. On the 25 mm reference rig at 1 kHz the 2-stage scheme
+(:mod:`workbench.integrate.jit`, cached on disk); plants with many states (line segments) are
+built from matrix expressions with a sparse QR factorised at run time, compiled likewise. On the 25 mm reference rig at 1 kHz the 2-stage scheme
 at 1 ms stays within about 1e-6 of full scale of CVODES at a tight tolerance (the
 default tolerances of :func:`workbench.simulate.open_loop` give about 1e-5); every
 result reports the RMS difference to CVODES interval by interval

@@ -22,7 +22,7 @@ RADAU_TABLES: dict[int, tuple[np.ndarray, np.ndarray]] = {
     s: (tab.A, np.array(tab.c, dtype=float)) for s, tab in RADAU_IIA.items()}
 
 #: Above this size of the stage equations (stages x states) the step is built from
-#: matrix expressions with a sparse LU instead of compiled scalar code (line segments).
+#: matrix expressions with a sparse QR instead of scalar code (line segments).
 LARGE_SYSTEM = 24
 
 
@@ -48,8 +48,12 @@ def _step_functions(model: Plant, nsel: int, out_idx: Sequence[int], stages: int
                                               ca.jacobian(y_expr, ps)])
 
     # Small plants: scalar expressions (SX) with a symbolic QR, compiled to C. Plants
-    # with many states (line segments) would give huge code: matrix expressions (MX)
-    # with a sparse LU at run time, evaluated by CasADi's virtual machine.
+    # with many states (line segments) would give huge code (3 segments, 16 states, 2
+    # stages: 81 s of gcc for the dense symbolic QR): matrix expressions (MX) with a
+    # sparse QR factorised at run time, also compiled (the generated C of CasADi's
+    # "qr" linear solver: ~6 s of gcc once per plant structure, cached on disk, for
+    # 2-3x cheaper sensitivities and 3-4x cheaper replays than the virtual machine;
+    # notes/s13/h12r_scripts/micro_gb.py, session 13).
     large = stages * nx > LARGE_SYSTEM
     T = ca.MX if large else ca.SX
     X = T.sym("X", nx)
@@ -69,7 +73,7 @@ def _step_functions(model: Plant, nsel: int, out_idx: Sequence[int], stages: int
     Xk, Sk = radau_sensitivity(tableau, fjac, X, Z, S, u, h, p, E, large)
     sens = ca.Function("gb_step_sens", [X, S, u, h, p, E], [Xk, Sk, y, dy],
                        ["X", "S", "u", "h", "p", "E"], ["Xn", "Sn", "y", "dy"])
-    if flags is None or large:        # CasADi's virtual machine, no compiler
+    if flags is None:        # CasADi's virtual machine, no compiler
         return primal, sens
     # compiled once, cached by the hash of the generated source (_jit changes the
     # working directory while generating, so never two at a time)
