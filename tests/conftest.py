@@ -7,8 +7,13 @@ values in the range a rig engineer would write.
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import io
 import math
+import os
+import shutil
+import sys
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
@@ -131,6 +136,31 @@ def make_plant(make_plant_file) -> Callable[..., Any]:
 _DESIGN_RUNS: dict[tuple[str, ...], tuple[int, Path]] = {}
 
 
+_DESIGN_CONSOLE: dict[tuple[str, ...], tuple[str, str]] = {}
+
+
+class _Tee:
+    """A text stream that keeps what is written (``text``) and passes it on."""
+
+    def __init__(self, stream) -> None:
+        self.stream, self.text = stream, io.StringIO()
+
+    def write(self, s: str) -> int:
+        self.text.write(s)
+        return self.stream.write(s)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+    def isatty(self) -> bool:
+        return False
+
+
+def design_console(name: str, *args: str) -> tuple[str, str]:
+    """(stdout, stderr) of :func:`run_design`'s one run of ``name`` with ``args``."""
+    return _DESIGN_CONSOLE[(name, *args)]
+
+
 def run_design(name: str, out: Path, *args: str) -> tuple[int, dict | None]:
     """Run ``designs/<name>.py``'s ``main(["--quick", *args, "--out", out])`` in-process.
 
@@ -144,14 +174,22 @@ def run_design(name: str, out: Path, *args: str) -> tuple[int, dict | None]:
     import shutil
     import tempfile
     key = (name, *args)
+    current = _plain_nodeid(os.environ.get("PYTEST_CURRENT_TEST", "").rsplit(" ", 1)[0])
+    if _ITEM_GROUPS.get(current, f"design:{name}") != f"design:{name}":
+        # a reader outside the design's group would make the run again on another worker
+        raise RuntimeError(f"{current} reads the run of designs/{name}.py: mark it "
+                           f"@pytest.mark.design({name!r}) (tests/conftest.py, scheduling)")
     if key not in _DESIGN_RUNS:
         root = Path(__file__).resolve().parents[1]
         mod = runpy.run_path(str(root / "designs" / f"{name}.py"), run_name="design")
         import atexit
         first = Path(tempfile.mkdtemp(prefix=f"wb_design_{name}_")) / "out"
         atexit.register(shutil.rmtree, first.parent, True)
-        rc = mod["main"](["--quick", *args, "--out", str(first)])
+        out_tee, err_tee = _Tee(sys.stdout), _Tee(sys.stderr)
+        with contextlib.redirect_stdout(out_tee), contextlib.redirect_stderr(err_tee):
+            rc = mod["main"](["--quick", *args, "--out", str(first)])
         _DESIGN_RUNS[key] = (rc, first)
+        _DESIGN_CONSOLE[key] = (out_tee.text.getvalue(), err_tee.text.getvalue())
     rc, first = _DESIGN_RUNS[key]
     if first.exists():
         shutil.copytree(first, out, dirs_exist_ok=True)
@@ -360,3 +398,160 @@ def check_figures(f, v, df, air_bound=None):
     close_value(f["p_max"], v["metrics"]["p_max"], "p_max")
     assert f["passed"] is v["passed"]
     assert f["failed"] == [c["name"] for c in v["checks"] if not c["passed"]]
+
+
+# ------------------------------------------------------------------ scheduling on workers
+#
+# CI runs ``pytest -n 2 --dist loadgroup`` (README). Every test is put in a group here,
+# and a group runs whole on one worker:
+#
+# * ``@pytest.mark.design("name")``: every test that reads a quick design's run (its own
+#   file's fixture, ``test_designs.py``, ``test_report_designs.py``) is in the group
+#   ``design:name``, so the run (:func:`run_design`, cached in the worker's process) is
+#   made once in the suite, not once on each worker that needs it;
+# * ``@pytest.mark.independent``: a test that shares no fixture with its neighbours is a
+#   group of its own (the concealed-effect diagnoses: each makes its own recording), so
+#   one heavy file does not pin a worker for a third of the suite;
+# * any other test: its file (as ``--dist loadfile``: module fixtures built once).
+#
+# The groups are ordered heaviest first (longest-processing-time-first: the light groups
+# fill in at the end, so the two workers finish together), by the measured times in
+# ``tests/durations.json`` (per test, seconds; a test not listed counts
+# :data:`_UNTIMED_S`). The order decides only where and when a test runs, never what it
+# checks. Refresh the times with ``WB_DURATIONS_OUT=tests/durations.json pytest ...``.
+#
+# xdist's own ``loadgroup`` renames a marked item's node id (``id@group``), which pytest 9.2
+# no longer lets a plugin do (measured: pytest 9.2.0 with xdist 3.8.0, every test became
+# its own unit), so the workers write the groups to a file the controller's scheduler
+# reads (:class:`_GroupScheduling`): the same rule, through documented hooks.
+
+DURATIONS = Path(__file__).resolve().parent / "durations.json"
+#: Seconds assumed for a test without a measured time (most tests take well under 1 s).
+_UNTIMED_S = 0.3
+#: Tests shorter than this are not written to the durations file (they count as untimed).
+_TIMED_FROM_S = 1.0
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "design(name): reads the quick run of designs/<name>.py "
+                            "(scheduled with every other reader of that run)")
+    config.addinivalue_line("markers", "independent: shares no fixture with its neighbours "
+                            "(may run on either worker)")
+
+
+def _plain_nodeid(nodeid: str) -> str:
+    """A node id without an xdist ``@group`` suffix."""
+    at, bracket = nodeid.rfind("@"), nodeid.rfind("]")
+    return nodeid[:at] if at > bracket else nodeid
+
+
+def _group(item) -> str:
+    mark = item.get_closest_marker("design")
+    if mark is not None:
+        return f"design:{mark.args[0]}"
+    if item.get_closest_marker("independent") is not None:
+        return item.nodeid
+    return item.nodeid.split("::", 1)[0]
+
+
+def _grouping(config) -> bool:
+    """True when the run is ``--dist loadgroup`` (on a worker xdist sets ``dist`` to "no"
+    and keeps ``loadgroup``)."""
+    return bool(getattr(config.option, "loadgroup", False)
+                or getattr(config.option, "dist", "no") == "loadgroup")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    if not _grouping(config):
+        return
+    import json
+    try:
+        times = json.loads(DURATIONS.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        times = {}
+    items[:], groups = schedule(items, times)
+    _ITEM_GROUPS.update(groups)
+    path = getattr(config, "workerinput", {}).get("wb_groups")
+    if path:
+        mine = Path(f"{path}.{config.workerinput['workerid']}")
+        tmp = mine.with_suffix(".tmp")
+        tmp.write_text(json.dumps(groups), encoding="utf-8")
+        tmp.replace(mine)
+
+
+#: node id -> group, filled when the run is grouped (read by :func:`run_design`'s check).
+_ITEM_GROUPS: dict[str, str] = {}
+
+
+def schedule(items: list, times: Mapping[str, float]) -> tuple[list, dict[str, str]]:
+    """``items`` in groups (:func:`_group`), heaviest group first by ``times`` (node id ->
+    s; :data:`_UNTIMED_S` if absent), each group's items in their order; and node id ->
+    group. The sort is stable, so every worker gets the same order (xdist checks it)."""
+    groups: dict[str, list] = {}
+    for item in items:
+        groups.setdefault(_group(item), []).append(item)
+    weight = {g: sum(times.get(i.nodeid, _UNTIMED_S) for i in its) for g, its in groups.items()}
+    order = sorted(groups, key=lambda g: (-weight[g], g))
+    return ([i for g in order for i in groups[g]],
+            {i.nodeid: g for g in order for i in groups[g]})
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """Controller: tell each worker where to write its groups (:class:`_GroupScheduling`)."""
+    config = node.config
+    if _grouping(config):
+        if not hasattr(config, "_wb_groups"):
+            import tempfile
+            folder = Path(tempfile.mkdtemp(prefix="wb_xdist_groups_"))
+            config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
+            config._wb_groups = folder / "groups.json"
+        node.workerinput["wb_groups"] = str(config._wb_groups)
+
+
+@pytest.hookimpl(optionalhook=True, tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class _GroupScheduling(LoadScopeScheduling):
+        """xdist's scope scheduling with the scopes the workers wrote (module docstring
+        above) and in their order (heaviest first, not xdist's largest-count first)."""
+
+        _groups: dict[str, str] | None = None
+
+        def _split_scope(self, nodeid: str) -> str:
+            if self._groups is None:
+                import json
+                self._groups = {}
+                where = getattr(config, "_wb_groups", None)
+                for f in sorted(where.parent.glob("groups.json.*")) if where else ():
+                    self._groups = json.loads(f.read_text(encoding="utf-8"))
+                    break
+            plain = _plain_nodeid(nodeid)
+            return self._groups.get(plain, plain.split("::", 1)[0])
+
+    config.option.loadscopereorder = False
+    return _GroupScheduling(config, log)
+
+
+_MEASURED: dict[str, float] = {}
+
+
+def pytest_runtest_logreport(report):
+    if os.environ.get("WB_DURATIONS_OUT"):
+        key = _plain_nodeid(report.nodeid)
+        _MEASURED[key] = _MEASURED.get(key, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session):
+    out = os.environ.get("WB_DURATIONS_OUT")
+    if not out or hasattr(session.config, "workerinput"):   # the controller writes
+        return
+    import json
+    timed = {k: round(v, 1) for k, v in sorted(_MEASURED.items()) if v >= _TIMED_FROM_S}
+    tmp = Path(out).with_suffix(".tmp")
+    tmp.write_text(json.dumps(timed, indent=0) + "\n", encoding="utf-8")
+    tmp.replace(out)

@@ -20,6 +20,9 @@ import pytest
 
 from conftest import run_design
 
+#: one quick run, shared with test_designs.py and test_report_designs.py (conftest)
+pytestmark = pytest.mark.design("nonlinear_comparison")
+
 CONTROLLERS = ("PD", "FL", "NMPC")
 
 

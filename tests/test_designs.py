@@ -17,7 +17,7 @@ import pytest
 from scipy import optimize, signal
 
 from conftest import (RHO_ANR_KG_M3, close_value as _close, check_figures,
-                      check_validation, run_design, trapezoid as _trap)
+                      check_validation, design_console, run_design, trapezoid as _trap)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,6 +29,7 @@ def situm_report(tmp_path_factory):
     return rc, out
 
 
+@pytest.mark.design("situm_p_pd")
 def test_situm_design_writes_both_reports(situm_report):
     rc, out = situm_report
     html = (out / "report.html").read_text()
@@ -47,6 +48,7 @@ def test_situm_design_writes_both_reports(situm_report):
     assert summary["design_passed"] is True and rc == 0
 
 
+@pytest.mark.design("situm_p_pd")
 def test_situm_design_reproduces_paper_000(situm_report):
     _, out = situm_report
     s = json.loads((out / "summary.json").read_text())
@@ -106,6 +108,7 @@ def rodless_sim(tmp_path_factory):
     return rc, out, summary
 
 
+@pytest.mark.design("situm_rodless_sim")
 def test_rodless_sim_linear_numbers_against_hand_formulas(rodless_sim):
     rc, out, s = rodless_sim
     assert rc == 0 and (out / "trajectory.png").stat().st_size > 0
@@ -146,6 +149,7 @@ def test_rodless_sim_linear_numbers_against_hand_formulas(rodless_sim):
     assert s["loop_gain_k0"] == pytest.approx(7.0, abs=0.05)        # Table II: K0 = 7.0
 
 
+@pytest.mark.design("situm_rodless_sim")
 def test_rodless_sim_closed_loop_against_the_sampled_linear_loop(rodless_sim):
     _, out, s = rodless_sim
     d = pd.read_csv(out / "trajectory.csv", comment="#")
@@ -191,6 +195,7 @@ def concealed(tmp_path_factory):
     return rc, out, summary
 
 
+@pytest.mark.design("diagnose_concealed")
 def test_concealed_quick_names_each_effect_and_nothing_else(concealed):
     rc, out, s = concealed
     cases = s["cases"]
@@ -236,6 +241,7 @@ def test_sets_table_counts_hits_misses_and_spurious_per_effect():
     assert text == "2/3 sets named exactly" and all_ok is False
 
 
+@pytest.mark.design("diagnose_concealed")
 def test_concealed_quick_fitted_values(concealed):
     _, _, s = concealed
     by_kind = {c["concealed"]: c for c in s["cases"]}
@@ -262,6 +268,7 @@ def _csv(path):
     return pd.read_csv(path, comment="#")
 
 
+@pytest.mark.design("situm_p_pd")
 def test_situm_design_every_validation_key(situm_report):
     """situm_p_pd's validation blocks from its CSVs; the gains and loop gains by hand."""
     _, out = situm_report
@@ -324,6 +331,7 @@ def fl_run(tmp_path_factory):
     return rc, out, _load(out)
 
 
+@pytest.mark.design("fl_position")
 def test_fl_design_every_key(fl_run):
     """fl_position: validations and figures from its CSVs, gains from the bandwidth,
     feasibility from its definitions, the must-show table's own arithmetic."""
@@ -399,6 +407,7 @@ def nmpc_run(tmp_path_factory):
     return rc, out, _load(out)
 
 
+@pytest.mark.design("nmpc_position")
 def test_nmpc_design_every_key(nmpc_run):
     """nmpc_position: validations and figures from its CSVs (with q_supply), the IAE
     ratio, the constraint table from the same runs, the solve-time statistics' order."""
@@ -447,6 +456,7 @@ def comparison_run(tmp_path_factory):
     return rc, out, _load(out)
 
 
+@pytest.mark.design("nonlinear_comparison")
 def test_comparison_design_every_validation_and_figure(comparison_run):
     """nonlinear_comparison: all six validations and figures from the CSVs (the robustness
     tables and verdict are checked in tests/test_comparison_design.py)."""
@@ -472,6 +482,7 @@ def test_comparison_design_every_validation_and_figure(comparison_run):
             assert all(p is (not f_) for p, f_ in zip(c["passed"], c["failed_checks"]))
 
 
+@pytest.mark.design("situm_p_pd")
 def test_situm_design_limits_and_loops_against_python_control(situm_report):
     """Every key of situm_p_pd's two limit tables and the closed loops' spectral radii,
     from python-control: the loop 1 / (s (s^2/w0^2 + 2 zeta s/w0 + 1)) discretised with
@@ -518,6 +529,7 @@ def test_situm_design_limits_and_loops_against_python_control(situm_report):
                                         rel=1e-9)
 
 
+@pytest.mark.design("situm_rodless_sim")
 def test_rodless_sim_remaining_keys(rodless_sim):
     """situm_rodless_sim: the plant, the operating point's position, the reduced model's
     fit and band, the pressure range from the CSV, the wall time."""
@@ -539,6 +551,7 @@ def test_rodless_sim_remaining_keys(rodless_sim):
     assert isinstance(wall, float) and 0.0 < wall < 60.0
 
 
+@pytest.mark.design("diagnose_concealed")
 def test_concealed_every_case_key(concealed):
     """diagnose_concealed: per case the seed (seed * 1000 + case), the drawn values
     (drawn again here from the seed), the score (named, correct, extra findings, relative
@@ -589,6 +602,7 @@ def force_run(tmp_path_factory):
     return rc, out, _load(out)
 
 
+@pytest.mark.design("force_tracking")
 def test_force_tracking_every_metric_from_its_csvs(force_run):
     """force_tracking: each run's figures from its CSV (e = force - force_ref; RMS, max,
     IAE by the trapezoid rule, air = integral of q_supply, command total variation, the
@@ -659,6 +673,7 @@ def plan_run(tmp_path_factory):
     return rc, out, _load(out)
 
 
+@pytest.mark.design("pressure_plan_position")
 def test_pressure_plan_position_every_metric_from_its_csvs(plan_run):
     """pressure_plan_position: each run's figures from its CSV (e = x - x_ref; moves are
     the waypoint intervals where the position changes, holds the rest; the last 0.2 s
@@ -726,17 +741,18 @@ def test_pressure_plan_position_every_metric_from_its_csvs(plan_run):
         assert pl["q_max"] > 0 and pl["air_mass"] > 0 and pl["saturated_fraction"] == 0.0
 
 
-def test_design_progress_goes_to_stderr_step_by_step(tmp_path, capsys):
+@pytest.mark.design("pressure_plan_position")
+def test_design_progress_goes_to_stderr_step_by_step(tmp_path):
     # issue 15: long steps in the designs were silent (the force-tracking Monte Carlo
     # for 126 s). Every step announces itself on stderr with the time of day, a step
-    # over 2 s says when it is done, results stay on stdout; one quick design (~3 s)
+    # over 2 s says when it is done, results stay on stdout; the suite's one quick run
+    # of the design, its console as run_design kept it
     import re
-    mod = runpy.run_path(str(ROOT / "designs" / "pressure_plan_position.py"), run_name="design")
-    rc = mod["main"](["--quick", "--out", str(tmp_path / "out")])
-    cap = capsys.readouterr()
+    rc, _ = run_design("pressure_plan_position", tmp_path / "out")
+    out, err = design_console("pressure_plan_position")
     assert rc == 0
-    steps = re.findall(r"^\[\d\d:\d\d:\d\d\] (.+) \.\.\.$", cap.err, flags=re.M)
+    steps = re.findall(r"^\[\d\d:\d\d:\d\d\] (.+) \.\.\.$", err, flags=re.M)
     assert steps == ["plants", "pressure plans", "closed loop", "write report"]
-    done = re.findall(r"^\[\d\d:\d\d:\d\d\] (.+): done in (\d+\.\d) s$", cap.err, flags=re.M)
+    done = re.findall(r"^\[\d\d:\d\d:\d\d\] (.+): done in (\d+\.\d) s$", err, flags=re.M)
     assert all(name in steps and float(s) > 2.0 for name, s in done)
-    assert "..." not in cap.out and "feedforward + feedback" in cap.out   # results on stdout
+    assert "..." not in out and "feedforward + feedback" in out   # results on stdout

@@ -120,6 +120,7 @@ def foreign_concealed(kind: str, seed: int, root: Path, duration: float = DURATI
     return _CACHE[key]
 
 
+@pytest.mark.independent          # its own recording: may run on either worker (conftest)
 @pytest.mark.parametrize("kind,seed", CASES, ids=[c[0] for c in CASES])
 def test_concealed_effect_is_diagnosed(kind, seed, diag_dir):
     from workbench.diagnose import diagnose

@@ -249,6 +249,7 @@ def test_force_bandwidth_refused_beyond_nyquist(affine):
 
 
 # ---------------------------------------------------------------------- design script
+@pytest.mark.design("force_tracking")
 def test_force_tracking_design_smoke(tmp_path):
     from conftest import run_design          # one quick run per session (test_designs too)
     rc, summary = run_design("force_tracking", tmp_path)

@@ -16,6 +16,9 @@ import pytest
 
 from conftest import run_design
 
+#: one quick run, shared with tests/test_report_designs.py (same worker: conftest)
+pytestmark = pytest.mark.design("paper_000")
+
 #: Table I (magnitudes and std from the paper; signs restored as in physics.md).
 TABLE1_A = [-2.4478, 2.1352, -0.7742, 0.0995]
 TABLE1_B1 = 0.0125

@@ -15,6 +15,9 @@ import pytest
 
 from conftest import run_design
 
+#: one quick run, shared with tests/test_report_designs.py (same worker: conftest)
+pytestmark = pytest.mark.design("paper_001")
+
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_DT = 0.4              # s, paper 001 after Fig. 9
 PAPER_CV, PAPER_XT = 0.274, 1.0     # eq. (2)

@@ -14,6 +14,9 @@ import pytest
 
 from conftest import run_design
 
+#: one quick run, shared with tests/test_report_designs.py (same worker: conftest)
+pytestmark = pytest.mark.design("paper_002")
+
 KEYS = {"result", "paper", "workbench", "unit", "source", "agrees"}
 # designs/plants/rig25_mpye.toml, typed here: nominal polytropic index and conductance
 KAPPA0, C0, MID, CENTER = 1.2, 6.25e-8, 0.25, 5.0

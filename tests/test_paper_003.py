@@ -15,6 +15,9 @@ from scipy import optimize
 
 from conftest import run_design
 
+#: one quick run, shared with tests/test_report_designs.py (same worker: conftest)
+pytestmark = pytest.mark.design("paper_003")
+
 R_AIR, RHO0, T0 = 287.0, 1.185, 293.15
 KEYS = {"result", "paper", "workbench", "unit", "source", "agrees"}
 

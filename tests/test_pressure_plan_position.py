@@ -18,6 +18,10 @@ ROOT = Path(__file__).resolve().parents[1]
 DESIGN = ROOT / "designs" / "pressure_plan_position.py"
 
 
+#: one quick run, shared with test_designs.py and test_report_designs.py (conftest)
+pytestmark = pytest.mark.design("pressure_plan_position")
+
+
 @pytest.fixture(scope="module")
 def design():
     return runpy.run_path(str(DESIGN), run_name="design")

@@ -31,7 +31,8 @@ DESIGNS = {
 MIN_FILL = 0.6
 
 
-@pytest.fixture(scope="module", params=sorted(DESIGNS))
+@pytest.fixture(scope="module",
+                params=[pytest.param(n, marks=pytest.mark.design(n)) for n in sorted(DESIGNS)])
 def report(request, tmp_path_factory) -> tuple[str, Path]:
     name = request.param
     out = tmp_path_factory.mktemp(f"report_{name}")
