@@ -222,22 +222,23 @@ def test_engine_guard_is_the_only_supply_pressure_it_keeps():
 
 
 def test_engine_input_chunks_are_the_padded_columns():
-    """The inputs converted once per chunk size (EngineInputs.chunks) are the columns in
-    order, the last chunk padded with the last column without its anchoring; the data
-    cannot be changed under the cache (read-only). Planted: a chunk offset by one
-    column, or the padding left anchored -> red."""
-    import casadi as ca
+    """The inputs laid out once per chunk size (EngineInputs.chunks, each chunk's
+    columns one after the other) are the columns in order, the last chunk padded with
+    the last column without its anchoring; neither the data nor a chunk can be changed
+    under the cache (read-only). Planted: a chunk offset by one column, or the padding
+    left anchored -> red."""
     from workbench.diagnose.engine import EngineInputs, INPUT_ROWS
     rng = np.random.default_rng(1)
     d = rng.uniform(0.5, 1.5, (len(INPUT_ROWS), 23))
     inp = EngineInputs(d)
     chunks = inp.chunks(10)
     assert len(chunks) == 3 and inp.chunks(10) is chunks          # made once
-    got = np.hstack([np.asarray(ca.DM(c)) for c in chunks])
+    got = np.hstack([c.reshape(len(INPUT_ROWS), 10, order="F") for c in chunks])
     assert np.array_equal(got[:, :23], d)
     anchors = [INPUT_ROWS.index(r) for r in ("anchor", "anchor_hidden", "anchor_p")]
     others = [i for i in range(len(INPUT_ROWS)) if i not in anchors]
     assert np.all(got[anchors, 23:] == 0.0)
     assert np.array_equal(got[others, 23:], np.repeat(d[others, -1:], 7, axis=1))
-    with pytest.raises(ValueError):
-        inp.data[0, 0] = 2.0
+    for a in (inp.data, chunks[0]):
+        with pytest.raises(ValueError):
+            a[0] = 2.0
