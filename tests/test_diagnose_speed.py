@@ -151,3 +151,94 @@ def test_one_blas_thread_within_a_diagnosis():
     with single_thread():
         assert all(int(get()) == 1 for get, _ in libs)
     assert [int(get()) for get, _ in libs] == before
+
+
+# ---------------------------------------------------------------- one C source per structure
+# The replay's C source is compiled once per plant structure and kept by its hash
+# (workbench.integrate.jit). A parameter value written into it as a literal makes
+# every value of it a new source and a new gcc run: the guards' supply pressure was
+# one (a fitted supply pressure's start values). It is an input now (Engine.guard).
+
+def _guard_engines(scales):
+    from workbench.diagnose import synth
+    from workbench.diagnose.engine import Engine
+    from workbench.plant import Plant
+    base = synth.nominal_params()
+    p_s = float(base["supply.pressure"])
+    return [Engine(Plant(base.replace(**{"supply.pressure": p_s * s})), 1e-3, None, jit=False,
+                   chunk=100) for s in scales]
+
+
+def _c_source(fun) -> str:
+    import os
+    import tempfile
+    import casadi as ca
+    with tempfile.TemporaryDirectory() as tmp:
+        gen = ca.CodeGenerator("f.c", {"with_header": False})
+        gen.add(fun)
+        gen.generate(tmp + os.sep)
+        with open(os.path.join(tmp, "f.c")) as fh:
+            return fh.read()
+
+
+def test_engine_source_does_not_depend_on_the_supply_pressure():
+    """Plants that differ only in their supply pressure (by the last bit, as a log
+    transform's round trip moves it, and by 10 %) give the same C source; planted bug:
+    the guards' literal ``prm["supply.pressure"]`` back in ``_error_too_large`` -> red."""
+    a, b, c = _guard_engines((1.0, 1.0 - 2.0 ** -52, 0.9))
+    assert _c_source(a._fun) == _c_source(b._fun) == _c_source(c._fun)
+    assert a.guard != b.guard != c.guard
+
+
+def test_engine_guard_is_the_only_supply_pressure_it_keeps():
+    """Two engines built at supply pressures 10 % apart replay the same parameter vector
+    bit-identically once the guard is the same, and differently with their own guards
+    where a guard decides (the ``inexact`` row: the local error measured against
+    1e-4 of the supply pressure): the guard is an input that counts, and the plant's
+    supply pressure is kept nowhere else. The command swings the valve fully open both
+    ways, so the pressures move fast and the local error crosses the thresholds."""
+    from workbench.diagnose.engine import EngineInputs, INPUT_ROWS
+    a, b = _guard_engines((1.0, 0.9))
+    t = np.arange(300) * 1e-3
+    u = np.where((t // 0.05) % 2 == 0, 9.5, 0.5)
+    d = np.zeros((len(INPUT_ROWS), len(t)))
+    d[INPUT_ROWS.index("u_rec")] = u
+    z0 = a.plant.initial_state(0.5 * a.plant.stroke)
+    ya = a.run(z0, EngineInputs(d), a.plant.p0)
+    yb = b.run(z0, EngineInputs(d), a.plant.p0)
+    inexact = a.rows.index("inexact")
+    assert np.all(np.isfinite(ya[:4]))
+    b_own = b.guard
+    b.guard = a.guard
+    try:
+        yb_a = b.run(z0, EngineInputs(d), a.plant.p0)
+        b.guard = 1e-3 * b_own           # thresholds 1000x tighter: every moving step flags
+        tight = b.run(z0, EngineInputs(d), a.plant.p0)
+    finally:
+        b.guard = b_own
+    assert np.array_equal(ya, yb_a, equal_nan=True)
+    assert tight[inexact].sum() > ya[inexact].sum()
+    assert not np.array_equal(yb[inexact], tight[inexact])
+
+
+def test_engine_input_chunks_are_the_padded_columns():
+    """The inputs laid out once per chunk size (EngineInputs.chunks, each chunk's
+    columns one after the other) are the columns in order, the last chunk padded with
+    the last column without its anchoring; neither the data nor a chunk can be changed
+    under the cache (read-only). Planted: a chunk offset by one column, or the padding
+    left anchored -> red."""
+    from workbench.diagnose.engine import EngineInputs, INPUT_ROWS
+    rng = np.random.default_rng(1)
+    d = rng.uniform(0.5, 1.5, (len(INPUT_ROWS), 23))
+    inp = EngineInputs(d)
+    chunks = inp.chunks(10)
+    assert len(chunks) == 3 and inp.chunks(10) is chunks          # made once
+    got = np.hstack([c.reshape(len(INPUT_ROWS), 10, order="F") for c in chunks])
+    assert np.array_equal(got[:, :23], d)
+    anchors = [INPUT_ROWS.index(r) for r in ("anchor", "anchor_hidden", "anchor_p")]
+    others = [i for i in range(len(INPUT_ROWS)) if i not in anchors]
+    assert np.all(got[anchors, 23:] == 0.0)
+    assert np.array_equal(got[others, 23:], np.repeat(d[others, -1:], 7, axis=1))
+    for a in (inp.data, chunks[0]):
+        with pytest.raises(ValueError):
+            a[0] = 2.0
