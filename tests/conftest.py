@@ -171,7 +171,6 @@ def run_design(name: str, out: Path, *args: str) -> tuple[int, dict | None]:
     """
     import json
     import runpy
-    import shutil
     import tempfile
     key = (name, *args)
     current = _plain_nodeid(os.environ.get("PYTEST_CURRENT_TEST", "").rsplit(" ", 1)[0])
@@ -432,13 +431,6 @@ _UNTIMED_S = 0.3
 _TIMED_FROM_S = 1.0
 
 
-def pytest_configure(config):
-    config.addinivalue_line("markers", "design(name): reads the quick run of designs/<name>.py "
-                            "(scheduled with every other reader of that run)")
-    config.addinivalue_line("markers", "independent: shares no fixture with its neighbours "
-                            "(may run on either worker)")
-
-
 def _plain_nodeid(nodeid: str) -> str:
     """A node id without an xdist ``@group`` suffix."""
     at, bracket = nodeid.rfind("@"), nodeid.rfind("]")
@@ -474,10 +466,8 @@ def pytest_collection_modifyitems(config, items):
     _ITEM_GROUPS.update(groups)
     path = getattr(config, "workerinput", {}).get("wb_groups")
     if path:
-        mine = Path(f"{path}.{config.workerinput['workerid']}")
-        tmp = mine.with_suffix(".tmp")
-        tmp.write_text(json.dumps(groups), encoding="utf-8")
-        tmp.replace(mine)
+        from workbench.params import atomic_write_text
+        atomic_write_text(f"{path}.{config.workerinput['workerid']}", json.dumps(groups))
 
 
 #: node id -> group, filled when the run is grouped (read by :func:`run_design`'s check).
@@ -551,7 +541,6 @@ def pytest_sessionfinish(session):
     if not out or hasattr(session.config, "workerinput"):   # the controller writes
         return
     import json
+    from workbench.params import atomic_write_text
     timed = {k: round(v, 1) for k, v in sorted(_MEASURED.items()) if v >= _TIMED_FROM_S}
-    tmp = Path(out).with_suffix(".tmp")
-    tmp.write_text(json.dumps(timed, indent=0) + "\n", encoding="utf-8")
-    tmp.replace(out)
+    atomic_write_text(out, json.dumps(timed, indent=0) + "\n")
